@@ -1,0 +1,65 @@
+"""Write one benchmark's section into docs/benchmarks.md, leaving the other sections alone.
+
+Each benchmark script owns the text between ``<!-- begin:NAME -->`` and ``<!-- end:NAME -->``;
+this helper replaces it (or appends it) and stamps the machine and the date.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import os
+import platform
+import re
+from pathlib import Path
+
+DOC = Path(__file__).resolve().parents[1] / "docs" / "benchmarks.md"
+HEADER = (
+    "# Benchmarks\n\n"
+    "Written by the scripts in `bench/` (never run by CI). Each section names the machine and the date it was\n"
+    "measured; compare ratios measured in one run, since absolute times on shared machines drift.\n"
+)
+
+
+def machine() -> str:
+    """One line describing this machine: CPU model, cores, Python, torch."""
+    cpu = platform.processor() or "unknown CPU"
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    try:
+        import torch
+
+        tv = f", torch {torch.__version__} ({torch.get_num_threads()} threads)"
+    except ImportError:
+        tv = ""
+    return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}{tv}"
+
+
+def write_section(name: str, title: str, body: str) -> None:
+    """Replace section ``name`` of docs/benchmarks.md with ``body`` (Markdown), stamped with machine and date."""
+    stamp = f"_Measured {_dt.date.today().isoformat()} on {machine()}._"
+    block = f"<!-- begin:{name} -->\n## {title}\n\n{stamp}\n\n{body.strip()}\n<!-- end:{name} -->"
+    text = DOC.read_text() if DOC.exists() else HEADER
+    pattern = re.compile(rf"<!-- begin:{re.escape(name)} -->.*?<!-- end:{re.escape(name)} -->", re.S)
+    if pattern.search(text):
+        text = pattern.sub(lambda _m: block, text)
+    else:
+        text = text.rstrip() + "\n\n" + block + "\n"
+    tmp = DOC.with_suffix(".md.tmp")
+    tmp.write_text(text)
+    os.replace(tmp, DOC)
+
+
+def table(headers: list[str], rows: list[list[object]]) -> str:
+    """A Markdown table; floats are printed with 4 significant digits."""
+
+    def fmt(v: object) -> str:
+        return f"{v:.4g}" if isinstance(v, float) else str(v)
+
+    lines = ["| " + " | ".join(headers) + " |", "|" + "---|" * len(headers)]
+    lines += ["| " + " | ".join(fmt(v) for v in row) + " |" for row in rows]
+    return "\n".join(lines)

@@ -1,0 +1,5 @@
+import sys
+
+from eigs.cli import main
+
+sys.exit(main())

@@ -1,0 +1,77 @@
+"""The ``eigs`` command: one subcommand per pipeline stage.
+
+Each subcommand lives in its stage package as a module exposing ``HELP`` (one line),
+``add_arguments(parser)`` and ``run(args) -> int | None``. Those modules import only argparse-level
+things at top level, so ``eigs --help`` stays fast; heavy imports happen inside ``run``.
+User errors (:class:`eigs.errors.EigsError`) print on one line and exit 2, without a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import sys
+from collections.abc import Sequence
+
+from eigs import __version__
+from eigs.errors import EigsError
+
+# subcommand name -> module path (in pipeline order)
+COMMANDS: dict[str, str] = {
+    "scene": "eigs.scene.cli",
+}
+
+
+def _add_common(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--threads", type=int, default=None, metavar="N", help="threads for torch/OpenMP/BLAS (default: all)"
+    )
+    parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="eigs",
+        description="Event-informed Gaussian Splatting pipeline. Each subcommand is one stage; "
+        "`eigs SUBCOMMAND --help` describes it.",
+    )
+    parser.add_argument("--version", action="version", version=f"eigs {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="SUBCOMMAND")
+    for name, module_name in COMMANDS.items():
+        module = importlib.import_module(module_name)
+        p = sub.add_parser(name, help=module.HELP, description=module.HELP)
+        module.add_arguments(p)
+        _add_common(p)
+        p.set_defaults(_run=module.run)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command is None:
+        parser.print_help()
+        return 2
+    logging.basicConfig(
+        level=logging.DEBUG if args.verbose else logging.INFO,
+        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+        stream=sys.stderr,
+    )
+    try:
+        if args.threads is not None:
+            from eigs.util.threads import set_threads
+
+            set_threads(args.threads)
+        code = args._run(args)
+    except EigsError as err:
+        print(f"eigs {args.command}: error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"eigs {args.command}: interrupted", file=sys.stderr)
+        return 130
+    return int(code or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""Event binning and EDI latent sharp frames."""

@@ -1,0 +1,174 @@
+"""The EDI artifact ``results/<scene>/b{B}/edi.h5`` (version 1): latent sharp frames and event integrals.
+
+Written by the ``edi`` stage, read by SfM, initialization, training (event loss, EDI baseline) and evaluation.
+Only this module knows its HDF5 paths. Latent PNGs beside it are named by :func:`latent_png_name`.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from eigs.errors import EigsError
+from eigs.util.atomic import atomic_path
+
+FORMAT_NAME = "eigs-edi"
+FORMAT_VERSION = 1
+MODES = ("e2nerf", "estimated")
+_PNG = re.compile(r"^v(\d{4})_k(\d{2})\.png$")
+
+
+def latent_png_name(view: int, k: int) -> str:
+    """File name of latent frame ``k`` of training view ``view`` (e.g. ``v0007_k03.png``)."""
+    return f"v{view:04d}_k{k:02d}.png"
+
+
+def parse_latent_png_name(name: str) -> tuple[int, int]:
+    """Inverse of :func:`latent_png_name`: ``"v0007_k03.png"`` → ``(7, 3)``."""
+    m = _PNG.match(os.path.basename(name))
+    if m is None:
+        raise EigsError(name, "not a latent frame name (expected vVVVV_kKK.png)")
+    return int(m.group(1)), int(m.group(2))
+
+
+@dataclass
+class EdiResult:
+    """EDI output for V views and B bins (L = B + 1 latent times per view).
+
+    - ``latent``: (V, L, H, W, C) float32 in [0, 1], the latent sharp frames in the scene's pixel domain
+      (same camera response as the blurry frames).
+    - ``timestamps_us``: (V, L) int64 latent times.
+    - ``cum_counts``: (V, L, H, W) int32 signed event counts from latent time 0 to latent time k (k = 0 is all
+      zero); the event integral between latent times a and b is ``cum_counts[:, b] - cum_counts[:, a]``.
+    - ``threshold``: (V,) float64 contrast threshold used per view (log-intensity units per event; in
+      ``e2nerf`` mode the constant c = 0.3 applied to 0–255 values).
+    - ``sharp``: (V,) bool, views with too few events: their latent frames are copies of the blurry frame and
+      later stages may render them once.
+    - ``event_count``: (V,) int64 events inside each exposure; ``events_per_pixel``: (V,) float64;
+      ``blur_extent_px``: (V,) float64 estimated blur extent.
+    - ``mode``: ``e2nerf`` or ``estimated``; ``threshold_scope``: ``scene``, ``view`` or ``given``.
+    """
+
+    latent: np.ndarray
+    timestamps_us: np.ndarray
+    cum_counts: np.ndarray
+    threshold: np.ndarray
+    sharp: np.ndarray
+    event_count: np.ndarray
+    events_per_pixel: np.ndarray
+    blur_extent_px: np.ndarray
+    mode: str
+    threshold_scope: str
+    scene_name: str = ""
+
+    @property
+    def n_views(self) -> int:
+        return int(self.latent.shape[0])
+
+    @property
+    def n_bins(self) -> int:
+        return int(self.latent.shape[1]) - 1
+
+    def validate(self, path: str | os.PathLike) -> None:
+        """Shapes, dtypes and finiteness; raises :class:`EigsError` naming ``path``."""
+        v, l_ = self.latent.shape[:2]
+        checks = [
+            (
+                self.latent.ndim == 5 and self.latent.dtype == np.float32,
+                "latent must be (V, L, H, W, C) float32",
+            ),
+            (
+                self.timestamps_us.shape == (v, l_) and self.timestamps_us.dtype == np.int64,
+                "timestamps_us must be (V, L) int64",
+            ),
+            (
+                self.cum_counts.shape == (v, l_, *self.latent.shape[2:4])
+                and self.cum_counts.dtype == np.int32,
+                "cum_counts must be (V, L, H, W) int32",
+            ),
+            (self.threshold.shape == (v,), "threshold must be (V,)"),
+            (self.sharp.shape == (v,) and self.sharp.dtype == np.bool_, "sharp must be (V,) bool"),
+            (self.event_count.shape == (v,), "event_count must be (V,)"),
+            (self.events_per_pixel.shape == (v,), "events_per_pixel must be (V,)"),
+            (self.blur_extent_px.shape == (v,), "blur_extent_px must be (V,)"),
+            (self.mode in MODES, f"mode must be one of {MODES}"),
+            (l_ >= 2, "at least 2 latent times (1 bin) per view"),
+        ]
+        for ok, msg in checks:
+            if not ok:
+                raise EigsError(path, msg)
+        for name in ("latent", "threshold", "events_per_pixel", "blur_extent_px"):
+            a = getattr(self, name)
+            if not np.all(np.isfinite(a)):
+                raise EigsError(path, f"{name} has NaN/Inf values")
+        if self.latent.size and (self.latent.min() < 0 or self.latent.max() > 1):
+            raise EigsError(path, "latent must lie in [0, 1]")
+        if v and np.any(self.cum_counts[:, 0] != 0):
+            raise EigsError(path, "cum_counts[:, 0] must be zero")
+
+
+def write_edi(result: EdiResult, path: str | os.PathLike) -> None:
+    """Validate and write atomically."""
+    result.validate(path)
+    with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
+        f.attrs.update(
+            format=FORMAT_NAME,
+            version=FORMAT_VERSION,
+            mode=result.mode,
+            bins=result.n_bins,
+            threshold_scope=result.threshold_scope,
+            scene=result.scene_name,
+        )
+        chunks = (1, 1, *result.latent.shape[2:]) if result.n_views else None
+        f.create_dataset("latent", data=result.latent, chunks=chunks)
+        for name in (
+            "timestamps_us",
+            "cum_counts",
+            "threshold",
+            "sharp",
+            "event_count",
+            "events_per_pixel",
+            "blur_extent_px",
+        ):
+            f.create_dataset(name, data=getattr(result, name))
+
+
+def read_edi(path: str | os.PathLike, *, latent: bool = True) -> EdiResult:
+    """Read and validate. ``latent=False`` skips the large arrays: ``latent`` comes back as (V, L, 0, 0, C)
+    and ``cum_counts`` as (V, L, 0, 0), everything else in full."""
+    p = Path(path)
+    if not p.exists():
+        raise EigsError(p, "no such EDI file (run the edi stage first)")
+    try:
+        with h5py.File(p, "r") as f:
+            if f.attrs.get("format") != FORMAT_NAME or int(f.attrs.get("version", -1)) != FORMAT_VERSION:
+                raise EigsError(p, "not an eigs EDI file of version 1")
+            lat = (
+                f["latent"][()]
+                if latent
+                else np.zeros((*f["latent"].shape[:2], 0, 0, f["latent"].shape[4]), np.float32)
+            )
+            res = EdiResult(
+                latent=lat,
+                timestamps_us=f["timestamps_us"][()],
+                cum_counts=f["cum_counts"][()]
+                if latent
+                else np.zeros((*f["latent"].shape[:2], 0, 0), np.int32),
+                threshold=f["threshold"][()],
+                sharp=f["sharp"][()],
+                event_count=f["event_count"][()],
+                events_per_pixel=f["events_per_pixel"][()],
+                blur_extent_px=f["blur_extent_px"][()],
+                mode=str(f.attrs["mode"]),
+                threshold_scope=str(f.attrs["threshold_scope"]),
+                scene_name=str(f.attrs.get("scene", "")),
+            )
+    except (OSError, KeyError) as err:
+        raise EigsError(p, f"corrupted EDI file ({err})") from None
+    res.validate(p)
+    return res

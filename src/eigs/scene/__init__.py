@@ -1,0 +1,36 @@
+"""The scene file (HDF5, version 1): data model, reader, writer and validation. See docs/scene-format.md."""
+
+from eigs.scene.io import SceneWriter, event_count, has_raw_events, read_events, read_scene, write_scene
+from eigs.scene.model import (
+    SHARP_KIND_BLUR_VIEW,
+    SHARP_KIND_NOVEL_VIEW,
+    BinnedEvents,
+    Camera,
+    Events,
+    Frames,
+    Poses,
+    Scene,
+    SharpImages,
+    Trajectory,
+)
+from eigs.scene.summary import summarize
+
+__all__ = [
+    "SHARP_KIND_BLUR_VIEW",
+    "SHARP_KIND_NOVEL_VIEW",
+    "BinnedEvents",
+    "Camera",
+    "Events",
+    "Frames",
+    "Poses",
+    "Scene",
+    "SceneWriter",
+    "SharpImages",
+    "Trajectory",
+    "event_count",
+    "has_raw_events",
+    "read_events",
+    "read_scene",
+    "summarize",
+    "write_scene",
+]
