@@ -41,15 +41,14 @@ def _open_read(path: str | os.PathLike) -> h5py.File:
         f = h5py.File(p, "r")
     except OSError as err:
         raise EigsError(p, f"not a readable HDF5 file ({err})") from None
-    if f.attrs.get("format") != FORMAT_NAME:
-        f.close()
-        raise EigsError(p, f"not an eigs scene file (attribute format={f.attrs.get('format')!r})")
+    fmt = f.attrs.get("format")
     version = int(f.attrs.get("version", -1))
+    if fmt != FORMAT_NAME:
+        f.close()
+        raise EigsError(p, f"not an eigs scene file (attribute format={fmt!r})")
     if version != FORMAT_VERSION:
         f.close()
-        raise EigsError(
-            p, f"scene format version {version} is not supported (this eigs reads {FORMAT_VERSION})"
-        )
+        raise EigsError(p, f"scene format version {version} is not supported (this eigs reads {FORMAT_VERSION})")
     return f
 
 
