@@ -17,3 +17,6 @@ rule resources:
         "../workflow/envs/eigs.yaml"
     shell:
         "eigs resources --dir resources --threads {threads} > {log} 2>&1"
+
+
+STAGE_TARGETS.extend(rules.resources.output)
