@@ -24,6 +24,14 @@ def test_dry_run_whole_dag(config):
     assert "synth" in proc.stdout
 
 
+def test_configfile_replaces_the_default_config():
+    """--configfile=config/toy.yaml must not be merged into config/config.yaml's six scenes."""
+    proc = snakemake("all", "-n", "--forceall", "--cores", "2", "--configfile=config/toy.yaml")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "results/toy/scene.h5" in proc.stdout
+    assert "results/blocks/" not in proc.stdout
+
+
 def test_lint_clean():
     proc = snakemake("--lint")
     assert proc.returncode == 0, proc.stdout + proc.stderr
