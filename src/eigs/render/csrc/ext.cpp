@@ -1,0 +1,184 @@
+// Python bindings of the rasterizer kernels (the only translation unit that includes torch headers).
+// Every function takes contiguous CPU tensors of one floating dtype (checked here) and returns new tensors.
+#include <torch/extension.h>
+
+#include <ATen/Parallel.h>
+
+#include <string>
+#include <tuple>
+
+#include "kernels.h"
+
+namespace {
+
+using torch::Tensor;
+
+void check(const Tensor& t, const char* name, at::ScalarType dtype) {
+    TORCH_CHECK(t.device().is_cpu(), name, " must be a CPU tensor");
+    TORCH_CHECK(t.scalar_type() == dtype, name, " must have dtype ", dtype, ", got ", t.scalar_type());
+    TORCH_CHECK(t.is_contiguous(), name, " must be contiguous");
+}
+
+template <typename S>
+eigs::Camera<S> make_camera(const Tensor& viewmat, const Tensor& K, int64_t width, int64_t height) {
+    eigs::Camera<S> cam;
+    const auto V = viewmat.accessor<S, 2>();
+    const auto k = K.accessor<S, 2>();
+    for (int i = 0; i < 3; ++i) {
+        for (int j = 0; j < 3; ++j) cam.R[i * 3 + j] = V[i][j];
+        cam.t[i] = V[i][3];
+    }
+    cam.fx = k[0][0];
+    cam.fy = k[1][1];
+    cam.cx = k[0][2];
+    cam.cy = k[1][2];
+    cam.width = width;
+    cam.height = height;
+    return cam;
+}
+
+int threads() { return std::max(1, at::get_num_threads()); }
+
+std::tuple<Tensor, Tensor, Tensor, Tensor, Tensor> project_fwd(Tensor means, Tensor quats, Tensor scales,
+                                                                Tensor opacities, Tensor viewmat, Tensor K,
+                                                                int64_t width, int64_t height) {
+    const auto dt = means.scalar_type();
+    for (auto& [t, name] : {std::pair<Tensor&, const char*>{means, "means"}, {quats, "quats"},
+                            {scales, "scales"}, {opacities, "opacities"}, {viewmat, "viewmat"}, {K, "K"}})
+        check(t, name, dt);
+    const int64_t n = means.size(0);
+    auto opt = means.options();
+    Tensor means2d = torch::empty({n, 2}, opt), conics = torch::empty({n, 3}, opt);
+    Tensor depths = torch::empty({n}, opt), extents = torch::empty({n, 2}, opt);
+    Tensor radii = torch::empty({n, 2}, opt.dtype(torch::kInt32));
+    AT_DISPATCH_FLOATING_TYPES(dt, "project_fwd", [&] {
+        const auto cam = make_camera<scalar_t>(viewmat, K, width, height);
+        eigs::project_forward<scalar_t>(n, means.data_ptr<scalar_t>(), quats.data_ptr<scalar_t>(),
+                                        scales.data_ptr<scalar_t>(), opacities.data_ptr<scalar_t>(), cam,
+                                        means2d.data_ptr<scalar_t>(), conics.data_ptr<scalar_t>(),
+                                        depths.data_ptr<scalar_t>(), extents.data_ptr<scalar_t>(),
+                                        radii.data_ptr<int32_t>(), threads());
+    });
+    return {means2d, conics, depths, extents, radii};
+}
+
+std::tuple<Tensor, Tensor, Tensor> project_bwd(Tensor means, Tensor quats, Tensor scales, Tensor viewmat,
+                                               Tensor K, int64_t width, int64_t height, Tensor radii,
+                                               Tensor v_means2d, Tensor v_conics) {
+    const auto dt = means.scalar_type();
+    for (auto& [t, name] : {std::pair<Tensor&, const char*>{means, "means"}, {quats, "quats"},
+                            {scales, "scales"}, {viewmat, "viewmat"}, {K, "K"}, {v_means2d, "v_means2d"},
+                            {v_conics, "v_conics"}})
+        check(t, name, dt);
+    check(radii, "radii", torch::kInt32);
+    const int64_t n = means.size(0);
+    Tensor v_means = torch::empty({n, 3}, means.options()), v_quats = torch::empty({n, 4}, means.options());
+    Tensor v_scales = torch::empty({n, 3}, means.options());
+    AT_DISPATCH_FLOATING_TYPES(dt, "project_bwd", [&] {
+        const auto cam = make_camera<scalar_t>(viewmat, K, width, height);
+        eigs::project_backward<scalar_t>(n, means.data_ptr<scalar_t>(), quats.data_ptr<scalar_t>(),
+                                         scales.data_ptr<scalar_t>(), cam, radii.data_ptr<int32_t>(),
+                                         v_means2d.data_ptr<scalar_t>(), v_conics.data_ptr<scalar_t>(),
+                                         v_means.data_ptr<scalar_t>(), v_quats.data_ptr<scalar_t>(),
+                                         v_scales.data_ptr<scalar_t>(), threads());
+    });
+    return {v_means, v_quats, v_scales};
+}
+
+std::tuple<Tensor, Tensor> isect_tiles(Tensor means2d, Tensor extents, Tensor depths, Tensor radii,
+                                       int64_t width, int64_t height) {
+    const auto dt = means2d.scalar_type();
+    check(means2d, "means2d", dt);
+    check(extents, "extents", dt);
+    check(depths, "depths", dt);
+    check(radii, "radii", torch::kInt32);
+    const int64_t n = means2d.size(0);
+    const int64_t n_tiles = ((width + 15) / 16) * ((height + 15) / 16);
+    Tensor offsets = torch::empty({n_tiles + 1}, means2d.options().dtype(torch::kInt64));
+    Tensor ids;
+    AT_DISPATCH_FLOATING_TYPES(dt, "isect_tiles", [&] {
+        int64_t* off = offsets.data_ptr<int64_t>();
+        const int64_t total = eigs::isect_count<scalar_t>(n, means2d.data_ptr<scalar_t>(),
+                                                          extents.data_ptr<scalar_t>(), radii.data_ptr<int32_t>(),
+                                                          width, height, off + 1);
+        off[0] = 0;
+        for (int64_t t = 0; t < n_tiles; ++t) off[t + 1] += off[t];
+        TORCH_CHECK(off[n_tiles] == total, "isect_tiles: inconsistent pair count");
+        ids = torch::empty({total}, means2d.options().dtype(torch::kInt64));
+        eigs::isect_fill<scalar_t>(n, means2d.data_ptr<scalar_t>(), extents.data_ptr<scalar_t>(),
+                                   depths.data_ptr<scalar_t>(), radii.data_ptr<int32_t>(), width, height, off,
+                                   ids.data_ptr<int64_t>());
+    });
+    return {offsets, ids};
+}
+
+std::tuple<Tensor, Tensor, Tensor> rasterize_fwd(Tensor means2d, Tensor conics, Tensor colors,
+                                                 Tensor opacities, Tensor extents, Tensor background,
+                                                 Tensor tile_offsets, Tensor flatten_ids, int64_t width,
+                                                 int64_t height, int64_t isa) {
+    const auto dt = means2d.scalar_type();
+    for (auto& [t, name] : {std::pair<Tensor&, const char*>{means2d, "means2d"}, {conics, "conics"},
+                            {colors, "colors"}, {opacities, "opacities"}, {extents, "extents"},
+                            {background, "background"}})
+        check(t, name, dt);
+    check(tile_offsets, "tile_offsets", torch::kInt64);
+    check(flatten_ids, "flatten_ids", torch::kInt64);
+    const int64_t d = colors.size(1);
+    auto opt = means2d.options();
+    Tensor image = torch::empty({height, width, d}, opt), trans = torch::empty({height, width}, opt);
+    Tensor last = torch::empty({height, width}, opt.dtype(torch::kInt32));
+    AT_DISPATCH_FLOATING_TYPES(dt, "rasterize_fwd", [&] {
+        eigs::rasterize_forward<scalar_t>(
+            means2d.data_ptr<scalar_t>(), conics.data_ptr<scalar_t>(), colors.data_ptr<scalar_t>(),
+            opacities.data_ptr<scalar_t>(), extents.data_ptr<scalar_t>(), background.data_ptr<scalar_t>(), d,
+            width, height, tile_offsets.data_ptr<int64_t>(), flatten_ids.data_ptr<int64_t>(),
+            image.data_ptr<scalar_t>(), trans.data_ptr<scalar_t>(), last.data_ptr<int32_t>(), threads(),
+            int(isa));
+    });
+    return {image, trans, last};
+}
+
+std::tuple<Tensor, Tensor, Tensor, Tensor> rasterize_bwd(Tensor means2d, Tensor conics, Tensor colors,
+                                                         Tensor opacities, Tensor extents, Tensor background,
+                                                         Tensor tile_offsets, Tensor flatten_ids, int64_t width,
+                                                         int64_t height, Tensor trans, Tensor last,
+                                                         Tensor v_image, Tensor v_alpha, int64_t isa) {
+    const auto dt = means2d.scalar_type();
+    for (auto& [t, name] : {std::pair<Tensor&, const char*>{means2d, "means2d"}, {conics, "conics"},
+                            {colors, "colors"}, {opacities, "opacities"}, {extents, "extents"},
+                            {background, "background"}, {trans, "trans"}, {v_image, "v_image"},
+                            {v_alpha, "v_alpha"}})
+        check(t, name, dt);
+    check(tile_offsets, "tile_offsets", torch::kInt64);
+    check(flatten_ids, "flatten_ids", torch::kInt64);
+    check(last, "last", torch::kInt32);
+    const int64_t n = means2d.size(0), d = colors.size(1);
+    const int64_t n_isects = flatten_ids.size(0);
+    auto opt = means2d.options();
+    Tensor pair_grads = torch::empty({n_isects, 6 + d}, opt);
+    Tensor v_means2d = torch::zeros({n, 2}, opt), v_conics = torch::zeros({n, 3}, opt);
+    Tensor v_opacities = torch::zeros({n}, opt), v_colors = torch::zeros({n, d}, opt);
+    AT_DISPATCH_FLOATING_TYPES(dt, "rasterize_bwd", [&] {
+        eigs::rasterize_backward<scalar_t>(
+            n, means2d.data_ptr<scalar_t>(), conics.data_ptr<scalar_t>(), colors.data_ptr<scalar_t>(),
+            opacities.data_ptr<scalar_t>(), extents.data_ptr<scalar_t>(), background.data_ptr<scalar_t>(), d,
+            width, height, tile_offsets.data_ptr<int64_t>(), flatten_ids.data_ptr<int64_t>(),
+            trans.data_ptr<scalar_t>(), last.data_ptr<int32_t>(), v_image.data_ptr<scalar_t>(),
+            v_alpha.data_ptr<scalar_t>(), pair_grads.data_ptr<scalar_t>(), v_means2d.data_ptr<scalar_t>(),
+            v_conics.data_ptr<scalar_t>(), v_opacities.data_ptr<scalar_t>(), v_colors.data_ptr<scalar_t>(),
+            threads(), int(isa));
+    });
+    return {v_means2d, v_conics, v_opacities, v_colors};
+}
+
+}  // namespace
+
+PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
+    m.doc() = "eigs CPU Gaussian rasterizer kernels";
+    m.def("project_fwd", &project_fwd);
+    m.def("project_bwd", &project_bwd);
+    m.def("isect_tiles", &isect_tiles);
+    m.def("rasterize_fwd", &rasterize_fwd);
+    m.def("rasterize_bwd", &rasterize_bwd);
+    m.def("cpu_isa_flags", &eigs::cpu_isa_flags);
+}

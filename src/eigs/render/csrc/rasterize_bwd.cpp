@@ -1,0 +1,246 @@
+// Backward compositing: per tile, the tile's Gaussian list back to front, one tile row per vector.
+// Rebuilds the transmittance in front of each Gaussian with T <- T / max(1e-6, 1 - alpha), starting from the
+// forward's final T, and the colour composited behind it with S <- alpha c + (1 - alpha) S.  Per-lane
+// accumulators are reduced once per (tile, Gaussian) into that pair's slot; the pairs are then summed per
+// Gaussian in isect order, so the result does not depend on the thread count or schedule (no atomics).
+#include <algorithm>
+#include <cstdint>
+#include <vector>
+
+#include "kernels.h"
+#include "raster_common.h"
+
+namespace eigs {
+namespace {
+
+template <typename S>
+struct BwdCtx {
+    const S *means2d, *conics, *colors, *opacities, *extents, *background;
+    int64_t d, width, height;
+    const int64_t *tile_offsets, *flatten_ids;
+    const S* trans;
+    const int32_t* last;
+    const S *v_image, *v_alpha;
+    S* pair_grads;
+};
+
+template <typename S>
+struct BwdScratch {
+    // T (transmittance behind the current Gaussian), Q = T_final (<bg, v_C> - v_alpha), colour behind (d x 256),
+    // v_C (d x 256), per-row temporaries, per-lane accumulators ((6 + d) x 16), last index.
+    std::vector<S> T, Q, Sb, G, alpha, fall, Tk, inv_om, valid, dot, acc;
+    std::vector<int32_t> last;
+    explicit BwdScratch(int64_t d)
+        : T(kTilePix), Q(kTilePix), Sb(size_t(d) * kTilePix), G(size_t(d) * kTilePix), alpha(kTile),
+          fall(kTile), Tk(kTile), inv_om(kTile), valid(kTile), dot(kTile), acc(size_t(6 + d) * kTile),
+          last(kTilePix) {}
+};
+
+template <typename S, int DC>
+EIGS_INLINE void bwd_tile(const BwdCtx<S>& A, int64_t tile, BwdScratch<S>& ws) {
+    const int64_t D = DC > 0 ? DC : A.d;
+    const int64_t P = 6 + D;
+    const TileGeom tg = tile_geom(tile, A.width, A.height);
+    const int64_t start = A.tile_offsets[tile], count = A.tile_offsets[tile + 1] - start;
+    S* __restrict__ T = ws.T.data();
+    S* __restrict__ Q = ws.Q.data();
+    S* __restrict__ Sb = ws.Sb.data();
+    S* __restrict__ G = ws.G.data();
+    S* __restrict__ alpha = ws.alpha.data();
+    S* __restrict__ fall = ws.fall.data();
+    S* __restrict__ Tk = ws.Tk.data();
+    S* __restrict__ inv_om = ws.inv_om.data();
+    S* __restrict__ valid = ws.valid.data();
+    S* __restrict__ dot = ws.dot.data();
+    S* __restrict__ acc = ws.acc.data();
+    int32_t* __restrict__ last = ws.last.data();
+
+    int32_t row_max_last[kTile];
+    int32_t tile_max_last = -1;
+    std::fill(Sb, Sb + D * kTilePix, S(0));
+    for (int r = 0; r < kTile; ++r) {
+        row_max_last[r] = -1;
+        for (int l = 0; l < kTile; ++l) {
+            const int q = r * kTile + l;
+            if (r < tg.rows && l < tg.cols) {
+                const int64_t pix = (tg.y0 + r) * A.width + (tg.x0 + l);
+                const S tf = A.trans[pix];
+                S bgdot = S(0);
+                for (int64_t ch = 0; ch < D; ++ch) {
+                    const S gv = A.v_image[pix * D + ch];
+                    G[ch * kTilePix + q] = gv;
+                    bgdot += A.background[ch] * gv;
+                }
+                T[q] = tf;
+                Q[q] = tf * (bgdot - A.v_alpha[pix]);
+                last[q] = A.last[pix];
+            } else {
+                for (int64_t ch = 0; ch < D; ++ch) G[ch * kTilePix + q] = S(0);
+                T[q] = S(1);
+                Q[q] = S(0);
+                last[q] = -1;
+            }
+            row_max_last[r] = std::max(row_max_last[r], last[q]);
+        }
+        tile_max_last = std::max(tile_max_last, row_max_last[r]);
+    }
+    S px[kTile];
+    for (int l = 0; l < kTile; ++l) px[l] = S(tg.x0 + l) + S(0.5);
+
+    for (int64_t k = count - 1; k >= 0; --k) {
+        S* __restrict__ out = A.pair_grads + (start + k) * P;
+        if (k > tile_max_last) {
+            std::fill(out, out + P, S(0));
+            continue;
+        }
+        const int64_t g = A.flatten_ids[start + k];
+        const S mx = A.means2d[2 * g], my = A.means2d[2 * g + 1];
+        const S ca = A.conics[3 * g], cb = A.conics[3 * g + 1], cc = A.conics[3 * g + 2];
+        const S op = A.opacities[g];
+        const S* __restrict__ col = A.colors + g * D;
+        int r0, r1;
+        box_rows(double(my), double(A.extents[2 * g + 1]), tg.y0, tg.rows, r0, r1);
+        const int32_t kk = int32_t(k);
+        std::fill(acc, acc + P * kTile, S(0));
+        for (int r = r0; r <= r1; ++r) {
+            if (kk > row_max_last[r]) continue;
+            const S dy = (S(tg.y0 + r) + S(0.5)) - my;
+            S* __restrict__ Tr = T + r * kTile;
+            const S* __restrict__ Qr = Q + r * kTile;
+            const int32_t* __restrict__ Lr = last + r * kTile;
+            // pass 1: alpha, validity, transmittance in front of the Gaussian
+#pragma omp simd
+            for (int l = 0; l < kTile; ++l) {
+                const S dx = px[l] - mx;
+                const S sigma = pair_sigma(ca, cb, cc, dx, dy);
+                const S f = pair_falloff(sigma);
+                const S a = pair_alpha(op, f);
+                const bool v = pair_valid(sigma, a) & (kk <= Lr[l]);
+                const S io = pair_inv_one_minus(a);
+                fall[l] = f;
+                alpha[l] = a;
+                valid[l] = v ? S(1) : S(0);
+                inv_om[l] = io;
+                Tk[l] = v ? Tr[l] * io : Tr[l];
+                dot[l] = S(0);
+            }
+            // pass 2 (per channel): v_color, sum_ch (c - S) v_C, and the colour behind
+            for (int64_t ch = 0; ch < D; ++ch) {
+                const S cv = col[ch];
+                S* __restrict__ Sr = Sb + ch * kTilePix + r * kTile;
+                const S* __restrict__ Gr = G + ch * kTilePix + r * kTile;
+                S* __restrict__ vcol = acc + (6 + ch) * kTile;
+#pragma omp simd
+                for (int l = 0; l < kTile; ++l) {
+                    const bool v = valid[l] != S(0);
+                    dot[l] += v ? (cv - Sr[l]) * Gr[l] : S(0);
+                    vcol[l] += v ? alpha[l] * Tk[l] * Gr[l] : S(0);
+                    Sr[l] = v ? alpha[l] * cv + (S(1) - alpha[l]) * Sr[l] : Sr[l];
+                }
+            }
+            // pass 3: v_alpha -> conic, mean2d, opacity
+            S* __restrict__ a_mx = acc;
+            S* __restrict__ a_my = acc + kTile;
+            S* __restrict__ a_a = acc + 2 * kTile;
+            S* __restrict__ a_b = acc + 3 * kTile;
+            S* __restrict__ a_c = acc + 4 * kTile;
+            S* __restrict__ a_o = acc + 5 * kTile;
+#pragma omp simd
+            for (int l = 0; l < kTile; ++l) {
+                const bool v = valid[l] != S(0);
+                const S dx = px[l] - mx;
+                const S v_alpha = dot[l] * Tk[l] - Qr[l] * inv_om[l];
+                const bool unclamped = v & pair_unclamped(op, fall[l]);
+                const PairGrad<S> pg = pair_backward(ca, cb, cc, op, fall[l], dx, dy, v_alpha, unclamped);
+                a_mx[l] += pg.v_mx;
+                a_my[l] += pg.v_my;
+                a_a[l] += pg.v_a;
+                a_b[l] += pg.v_b;
+                a_c[l] += pg.v_c;
+                a_o[l] += pg.v_o;
+                Tr[l] = Tk[l];
+            }
+        }
+        for (int64_t j = 0; j < P; ++j) {
+            S s = S(0);
+            for (int l = 0; l < kTile; ++l) s += acc[j * kTile + l];
+            out[j] = s;
+        }
+    }
+}
+
+template <typename S>
+using BwdFn = void (*)(const BwdCtx<S>&, int64_t, BwdScratch<S>&);
+
+#define EIGS_BWD_VARIANT(NAME, TARGET, S, DC) \
+    TARGET void NAME(const BwdCtx<S>& a, int64_t t, BwdScratch<S>& ws) { bwd_tile<S, DC>(a, t, ws); }
+
+EIGS_BWD_VARIANT(bwd_f32_c1_base, EIGS_TARGET_BASE, float, 1)
+EIGS_BWD_VARIANT(bwd_f32_c3_base, EIGS_TARGET_BASE, float, 3)
+EIGS_BWD_VARIANT(bwd_f32_cd_base, EIGS_TARGET_BASE, float, 0)
+EIGS_BWD_VARIANT(bwd_f32_c1_avx2, EIGS_TARGET_AVX2, float, 1)
+EIGS_BWD_VARIANT(bwd_f32_c3_avx2, EIGS_TARGET_AVX2, float, 3)
+EIGS_BWD_VARIANT(bwd_f32_cd_avx2, EIGS_TARGET_AVX2, float, 0)
+EIGS_BWD_VARIANT(bwd_f32_c1_avx512, EIGS_TARGET_AVX512, float, 1)
+EIGS_BWD_VARIANT(bwd_f32_c3_avx512, EIGS_TARGET_AVX512, float, 3)
+EIGS_BWD_VARIANT(bwd_f32_cd_avx512, EIGS_TARGET_AVX512, float, 0)
+EIGS_BWD_VARIANT(bwd_f64_cd_base, EIGS_TARGET_BASE, double, 0)
+
+BwdFn<float> pick_bwd(const float*, int64_t d, int isa) {
+    const int c = d == 1 ? 0 : d == 3 ? 1 : 2;
+    static const BwdFn<float> table[3][3] = {
+        {bwd_f32_c1_base, bwd_f32_c3_base, bwd_f32_cd_base},
+        {bwd_f32_c1_avx2, bwd_f32_c3_avx2, bwd_f32_cd_avx2},
+        {bwd_f32_c1_avx512, bwd_f32_c3_avx512, bwd_f32_cd_avx512},
+    };
+    return table[isa - kIsaBase][c];
+}
+
+BwdFn<double> pick_bwd(const double*, int64_t, int) { return bwd_f64_cd_base; }
+
+}  // namespace
+
+template <typename S>
+void rasterize_backward(int64_t n, const S* means2d, const S* conics, const S* colors, const S* opacities,
+                        const S* extents, const S* background, int64_t d, int64_t width, int64_t height,
+                        const int64_t* tile_offsets, const int64_t* flatten_ids, const S* trans,
+                        const int32_t* last, const S* v_image, const S* v_alpha, S* pair_grads,
+                        S* v_means2d, S* v_conics, S* v_opacities, S* v_colors, int nthreads, int isa) {
+    const BwdCtx<S> A{means2d, conics,       colors,      opacities, extents, background, d,       width,
+                      height,  tile_offsets, flatten_ids, trans,     last,    v_image,    v_alpha, pair_grads};
+    const BwdFn<S> fn = pick_bwd(means2d, d, resolve_isa(isa));
+    const int64_t n_tiles = ((width + kTile - 1) / kTile) * ((height + kTile - 1) / kTile);
+#pragma omp parallel num_threads(nthreads)
+    {
+        BwdScratch<S> ws(d);
+#pragma omp for schedule(dynamic, 1)
+        for (int64_t t = 0; t < n_tiles; ++t) fn(A, t, ws);
+    }
+    // Fixed-order reduction of the per-pair gradients into per-Gaussian gradients.
+    (void)n;
+    const int64_t n_isects = tile_offsets[n_tiles];
+    const int64_t P = 6 + d;
+    for (int64_t i = 0; i < n_isects; ++i) {
+        const int64_t g = flatten_ids[i];
+        const S* pg = pair_grads + i * P;
+        v_means2d[2 * g] += pg[0];
+        v_means2d[2 * g + 1] += pg[1];
+        v_conics[3 * g] += pg[2];
+        v_conics[3 * g + 1] += pg[3];
+        v_conics[3 * g + 2] += pg[4];
+        v_opacities[g] += pg[5];
+        for (int64_t ch = 0; ch < d; ++ch) v_colors[g * d + ch] += pg[6 + ch];
+    }
+}
+
+template void rasterize_backward<float>(int64_t, const float*, const float*, const float*, const float*,
+                                        const float*, const float*, int64_t, int64_t, int64_t, const int64_t*,
+                                        const int64_t*, const float*, const int32_t*, const float*, const float*,
+                                        float*, float*, float*, float*, float*, int, int);
+template void rasterize_backward<double>(int64_t, const double*, const double*, const double*, const double*,
+                                         const double*, const double*, int64_t, int64_t, int64_t,
+                                         const int64_t*, const int64_t*, const double*, const int32_t*,
+                                         const double*, const double*, double*, double*, double*, double*,
+                                         double*, int, int);
+
+}  // namespace eigs
