@@ -1,0 +1,42 @@
+"""Ingestion: event and frame sources → the scene file (``eigs ingest``).
+
+One module per source format (:mod:`eigs.io.e2nerf`, :mod:`eigs.io.h5events`, :mod:`eigs.io.text`,
+:mod:`eigs.io.aedat4`) plus shared pieces: :mod:`eigs.io.options` (user options), :mod:`eigs.io.images`,
+:mod:`eigs.io.timeconv` (units, polarity), :mod:`eigs.io.poses` (axis conventions), :mod:`eigs.io.undistort`,
+:mod:`eigs.io.raw` (time windows, view assignment, streaming write) and :mod:`eigs.io.summary`.
+Conventions and the exact conversions of every format: ``docs/ingestion.md``.
+
+Kept import-light: the CLI imports this package at start-up.
+"""
+
+from __future__ import annotations
+
+FORMATS = ("e2nerf-synthetic", "e2nerf-real", "h5", "txt", "aedat4")
+
+
+def ingest(fmt: str, source: str, out: str, options: object | None = None) -> str:
+    """Read ``source`` in format ``fmt`` and write the scene file ``out`` atomically.
+
+    ``options``: an :class:`eigs.io.options.IngestOptions` (defaults when None). Returns the printed summary.
+    Raises :class:`eigs.errors.EigsError` on bad input; nothing is written then.
+    """
+    from eigs.errors import EigsError
+    from eigs.io.options import IngestOptions
+
+    opts = options if options is not None else IngestOptions()
+    assert isinstance(opts, IngestOptions)
+    if fmt in ("e2nerf-synthetic", "e2nerf-real"):
+        from eigs.io.e2nerf import ingest_e2nerf
+
+        return ingest_e2nerf(fmt, source, out, opts)
+    if fmt == "h5":
+        from eigs.io.h5events import open_h5_source as opener
+    elif fmt == "txt":
+        from eigs.io.text import open_text_source as opener
+    elif fmt == "aedat4":
+        from eigs.io.aedat4 import open_aedat4_source as opener
+    else:
+        raise EigsError(None, f"unknown format {fmt!r} (one of {', '.join(FORMATS)})")
+    from eigs.io.raw import ingest_raw
+
+    return ingest_raw(opener(source, opts), out, opts)

@@ -1,0 +1,94 @@
+"""``eigs ingest --format FORMAT SOURCE -o scene.h5``: read a dataset or recording into a scene file."""
+
+from __future__ import annotations
+
+import argparse
+
+HELP = "read E²NeRF layouts, HDF5/text/AEDAT4 event recordings and frames into a scene file"
+
+_FORMATS = ("e2nerf-synthetic", "e2nerf-real", "h5", "txt", "aedat4")  # == eigs.io.FORMATS (kept import-light)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.epilog = "Formats, conversions and the frames sidecar: docs/ingestion.md."
+    parser.add_argument("--format", required=True, choices=_FORMATS, help="source format")
+    parser.add_argument("source", help="dataset folder or event file")
+    parser.add_argument("-o", "--output", required=True, metavar="SCENE.h5", help="scene file to write (atomically)")
+    parser.add_argument("--name", help="scene name (default: the source folder or file stem)")
+    parser.add_argument(
+        "--intrinsics",
+        metavar="SPEC",
+        help="FX,FY,CX,CY[,K1,K2,P1,P2[,K3]] or a file with those numbers, OpenCV convention (pixel centres at "
+        "integers); overrides the source's calibration",
+    )
+    parser.add_argument("--sensor-size", metavar="WxH", help="sensor size when the source does not state it")
+    parser.add_argument(
+        "--exposure-us",
+        metavar="START,END",
+        help="exposure window as offsets (µs) from each frame timestamp, for sources without exposure times",
+    )
+    parser.add_argument(
+        "--keep-events",
+        choices=("exposures", "all"),
+        help="keep only events inside the views' exposures, or all (default: exposures when known, else all)",
+    )
+    parser.add_argument("--views", metavar="SPEC", help="views to keep: indices and slices, e.g. 0:30 or ::10 or 0,4,9")
+    parser.add_argument(
+        "--time-window",
+        metavar="START,END",
+        help="keep events with START ≤ t < END and the views whose exposure lies inside (µs, source clock)",
+    )
+    parser.add_argument(
+        "--groundtruth", metavar="FILE", help="ground-truth poses 't tx ty tz qx qy qz qw' (T_world_cam)"
+    )
+    parser.add_argument(
+        "--no-undistort",
+        dest="undistort",
+        action="store_false",
+        help="keep the calibration's distortion instead of undistorting frames and events",
+    )
+    parser.add_argument("--time-unit", choices=("s", "ms", "us", "ns"), help="h5: time unit when the file does not say")
+    parser.add_argument(
+        "--frames", metavar="FILE", help="h5: frames sidecar (default: <stem>.frames.txt beside the file)"
+    )
+    parser.add_argument(
+        "--camera-response", default="unknown", choices=("linear", "srgb", "unknown"), help="frame intensity response"
+    )
+    parser.add_argument("--contrast-threshold", type=float, help="event contrast threshold C, when known")
+    parser.add_argument("--compression", default="none", choices=("none", "gzip", "lzf"), help="scene file compression")
+
+
+def options_from_args(args: argparse.Namespace):  # -> IngestOptions
+    """argparse namespace → :class:`eigs.io.options.IngestOptions` (values parsed and checked)."""
+    from eigs.io.options import IngestOptions, parse_int_pair, parse_size
+
+    return IngestOptions(
+        name=args.name,
+        intrinsics=args.intrinsics,
+        sensor_size=None if args.sensor_size is None else parse_size(args.sensor_size),
+        exposure_us=None if args.exposure_us is None else parse_int_pair("--exposure-us", args.exposure_us),
+        keep_events=args.keep_events,
+        views=args.views,
+        time_window=None if args.time_window is None else parse_int_pair("--time-window", args.time_window),
+        groundtruth=args.groundtruth,
+        undistort=args.undistort,
+        time_unit=args.time_unit,
+        frames=args.frames,
+        camera_response=args.camera_response,
+        contrast_threshold=args.contrast_threshold,
+        compression=args.compression,
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    import logging
+    import time
+
+    from eigs.io import ingest
+
+    t0 = time.perf_counter()
+    text = ingest(args.format, args.source, args.output, options_from_args(args))
+    print(f"wrote {args.output} in {time.perf_counter() - t0:.1f} s")
+    print(text)
+    logging.getLogger(__name__).debug("ingest done")
+    return 0

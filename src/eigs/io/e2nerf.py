@@ -1,0 +1,388 @@
+"""E²NeRF dataset layouts (``--format e2nerf-synthetic`` / ``e2nerf-real``) → a scene with binned events.
+
+Facts: ``docs/ingestion.md`` and the dataset note (``e2nerf-dataset.md``). Each view has its own clock (µs):
+
+- synthetic: exposure [0, 170000]; latent poses ``transform_matrix`` entries 1, 5, 9, 13, 17 at
+  10000 + 40000·k (k = 0..4); bin edges 0, 50000, 90000, 130000, 170000.
+- real: exposure [0, 100004]; latent poses ``poses_bounds.npy`` rows 5i..5i+4 at 25001·k; bin edges
+  0, 25001, 50002, 75003, 100004.
+
+``events.pt`` (float64 (V, 4, H·W), signed net counts per bin, flat index y·W + x) → ``events/binned`` int32
+(V, 4, H, W); every value must be an integer.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import re
+from pathlib import Path
+
+import numpy as np
+
+from eigs.errors import EigsError
+from eigs.io.options import IngestOptions, parse_intrinsics, parse_views
+from eigs.scene.model import (
+    SHARP_KIND_BLUR_VIEW,
+    SHARP_KIND_NOVEL_VIEW,
+    BinnedEvents,
+    Camera,
+    Frames,
+    Poses,
+    Scene,
+    SharpImages,
+)
+
+log = logging.getLogger(__name__)
+
+SYN_EXPOSURE_US = (0, 170_000)
+SYN_LATENT_ENTRIES = (1, 5, 9, 13, 17)
+SYN_LATENT_T_US = np.array([10_000, 50_000, 90_000, 130_000, 170_000], dtype=np.int64)
+SYN_BIN_EDGES_US = np.array([0, 50_000, 90_000, 130_000, 170_000], dtype=np.int64)
+SYN_TEST_ENTRY = 1  # ground truth is rendered at transform_matrix[1]
+REAL_BIN_US = 25_001
+REAL_EXPOSURE_US = (0, 4 * REAL_BIN_US)
+REAL_LATENT_T_US = REAL_BIN_US * np.arange(5, dtype=np.int64)
+REAL_BIN_EDGES_US = REAL_LATENT_T_US.copy()
+REAL_POSES_PER_VIEW = 5
+N_BINS = 4
+POSE_TOL = 1e-6  # blur-view ground-truth pose vs the view's first latent pose
+
+
+def load_event_tensor(path: Path, n_views: int, height: int, width: int) -> np.ndarray:
+    """``events.pt`` → (V, 4, H, W) int32. Accepts (V, 4, H·W) (as E²NeRF saves it) or (V, 4, H, W); values
+    must be finite integers that fit int32. Memory-maps the file when torch can, converting view by view."""
+    import torch
+
+    if not path.is_file():
+        raise EigsError(path, "missing event tensor")
+    try:
+        try:
+            ten = torch.load(path, map_location="cpu", weights_only=True, mmap=True)
+        except RuntimeError as err:  # legacy (non-zip) serialisation cannot be memory-mapped
+            if "mmap" not in str(err):
+                raise
+            ten = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as err:
+        raise EigsError(
+            path, f"not a readable torch tensor file, truncated or corrupted ({type(err).__name__})"
+        ) from None
+    if not isinstance(ten, torch.Tensor):
+        raise EigsError(path, f"holds a {type(ten).__name__}, expected one tensor")
+    shape = tuple(ten.shape)
+    if shape not in ((n_views, N_BINS, height * width), (n_views, N_BINS, height, width)):
+        raise EigsError(
+            path,
+            f"has shape {'×'.join(map(str, shape))}, expected {n_views}×{N_BINS}×{height * width} "
+            f"(views × bins × H·W for {n_views} images of {width}×{height})",
+        )
+    if ten.dtype.is_complex or ten.dtype == torch.bool:
+        raise EigsError(path, f"has dtype {ten.dtype}, expected signed event counts")
+    out = np.empty((n_views, N_BINS, height, width), dtype=np.int32)
+    for v in range(n_views):
+        a = ten[v].numpy().reshape(N_BINS, height, width)
+        if a.dtype.kind == "f":
+            if not np.all(np.isfinite(a)):
+                raise EigsError(path, f"view {v} has NaN/Inf counts")
+            frac = a != np.round(a)
+            if np.any(frac):
+                b, i, j = (int(k[0]) for k in np.nonzero(frac))
+                raise EigsError(
+                    path, f"count {a[b, i, j]!r} at view {v}, bin {b}, pixel (x={j}, y={i}) is not an integer"
+                )
+        if a.size and (a.max() > np.iinfo(np.int32).max or a.min() < np.iinfo(np.int32).min):
+            raise EigsError(path, f"view {v} has counts beyond int32")
+        out[v] = a
+    return out
+
+
+def _read_json(path: Path) -> dict:
+    if not path.is_file():
+        raise EigsError(path, "missing file")
+    try:
+        meta = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        raise EigsError(path, f"not valid JSON ({err})") from None
+    if not isinstance(meta, dict) or not isinstance(meta.get("frames"), list):
+        raise EigsError(path, "has no 'frames' list")
+    return meta
+
+
+def _frame_matrices(path: Path, frame: object, i: int, min_entries: int) -> np.ndarray:
+    """``transform_matrix`` of frame ``i`` → (M, 4, 4) float64 with M ≥ ``min_entries``."""
+    if not isinstance(frame, dict) or "transform_matrix" not in frame:
+        raise EigsError(path, f"frame {i} has no transform_matrix")
+    try:
+        m = np.asarray(frame["transform_matrix"], dtype=np.float64)
+    except (TypeError, ValueError):
+        raise EigsError(path, f"frame {i}: transform_matrix is not a list of 4×4 matrices") from None
+    if m.shape == (4, 4):
+        raise EigsError(
+            path, f"frame {i}: transform_matrix is one 4×4 matrix (plain NeRF layout), E²NeRF lists one per sub-frame"
+        )
+    if m.ndim != 3 or m.shape[1:] != (4, 4) or m.shape[0] < min_entries:
+        raise EigsError(
+            path,
+            f"frame {i}: transform_matrix has shape {'×'.join(map(str, m.shape))}, "
+            f"expected ≥ {min_entries} 4×4 matrices",
+        )
+    if not np.all(np.isfinite(m)):
+        raise EigsError(path, f"frame {i}: transform_matrix has NaN/Inf")
+    return m
+
+
+def _frames_by_stem(path: Path, meta: dict) -> dict[str, tuple[int, dict]]:
+    out: dict[str, tuple[int, dict]] = {}
+    for i, fr in enumerate(meta["frames"]):
+        if not isinstance(fr, dict) or not isinstance(fr.get("file_path"), str):
+            raise EigsError(path, f"frame {i} has no file_path")
+        stem = Path(fr["file_path"]).stem if Path(fr["file_path"]).suffix == ".png" else Path(fr["file_path"]).name
+        if stem in out:
+            raise EigsError(path, f"frames {out[stem][0]} and {i} both name {stem}")
+        out[stem] = (i, fr)
+    return out
+
+
+def _numbered(folder: Path, pattern: str, what: str) -> dict[int, Path]:
+    """Files in ``folder`` whose name matches ``pattern`` (one integer group) → {number: path}."""
+    if not folder.is_dir():
+        raise EigsError(folder, f"missing folder ({what})")
+    rx = re.compile(pattern)
+    out: dict[int, Path] = {}
+    for p in folder.iterdir():
+        m = rx.fullmatch(p.name)
+        if m:
+            out[int(m.group(1))] = p
+    if not out:
+        raise EigsError(folder, f"holds no {what}")
+    return out
+
+
+def _check_sequence(folder: Path, numbers: list[int], step: int, what: str) -> None:
+    want = list(range(0, step * len(numbers), step))
+    if sorted(numbers) != want:
+        missing = sorted(set(want) - set(numbers))
+        extra = sorted(set(numbers) - set(want))
+        detail = f"missing {missing[:5]}" if missing else f"unexpected {extra[:5]}"
+        raise EigsError(folder, f"{what} must be numbered 0, {step}, …, {want[-1]} without gaps ({detail})")
+
+
+def _intrinsics_override(opts: IngestOptions, K: np.ndarray, source_desc: str) -> tuple[np.ndarray, np.ndarray, str]:
+    if opts.intrinsics is None:
+        return K, np.zeros(5), source_desc
+    K2, dist = parse_intrinsics(opts.intrinsics)
+    if np.any(dist != 0) and opts.undistort:
+        raise EigsError(
+            "--intrinsics",
+            "has distortion, but binned events.pt cannot be undistorted exactly; add --no-undistort to keep it",
+        )
+    return K2, dist, f"--intrinsics {opts.intrinsics}"
+
+
+def read_e2nerf_synthetic(folder: Path, opts: IngestOptions) -> tuple[Scene, list[str]]:
+    """An E²NeRF synthetic scene folder → (Scene, notes)."""
+    from eigs.io.images import read_images
+    from eigs.io.poses import blender_to_opencv
+
+    if not folder.is_dir():
+        raise EigsError(folder, "no such folder")
+    notes: list[str] = []
+    train_json = folder / "transform_train.json"
+    if not train_json.is_file() and (folder / "transforms_train.json").is_file():
+        raise EigsError(train_json, "missing (found transforms_train.json: a plain NeRF-synthetic scene, not E²NeRF)")
+    meta = _read_json(train_json)
+    angle = meta.get("camera_angle_x")
+    if not isinstance(angle, (int, float)) or not np.isfinite(angle) or not 0 < angle < np.pi:
+        raise EigsError(train_json, f"camera_angle_x must be a number in (0, π), got {angle!r}")
+    by_stem = _frames_by_stem(train_json, meta)
+
+    imgs = _numbered(folder / "train", r"r_(\d+)\.png", "train images r_N.png")
+    _check_sequence(folder / "train", list(imgs), 2, "train images")
+    nums = sorted(imgs)
+    n_views = len(nums)
+    latent = np.empty((n_views, len(SYN_LATENT_ENTRIES), 4, 4))
+    for v, n in enumerate(nums):
+        if f"r_{n}" not in by_stem:
+            raise EigsError(train_json, f"no frame has file_path …/r_{n} (for train/r_{n}.png)")
+        i, fr = by_stem[f"r_{n}"]
+        m = _frame_matrices(train_json, fr, i, max(SYN_LATENT_ENTRIES) + 1)
+        latent[v] = m[list(SYN_LATENT_ENTRIES)]
+    latent = blender_to_opencv(latent)
+    blurry = read_images([imgs[n] for n in nums], desc="train images")
+    _, h, w, c = blurry.shape
+
+    focal = 0.5 * w / np.tan(0.5 * float(angle))
+    K = np.array([[focal, 0.0, w / 2], [0.0, focal, h / 2], [0.0, 0.0, 1.0]])
+    K, dist, calib = _intrinsics_override(opts, K, f"camera_angle_x = {angle} (pinhole, principal point W/2, H/2)")
+
+    counts = load_event_tensor(folder / "events.pt", n_views, h, w)
+
+    sharp = None
+    test_json = folder / "transform_test.json"
+    if test_json.is_file():
+        tmeta = _read_json(test_json)
+        test_imgs, test_c2w, test_kind, test_view = [], [], [], []
+        for i, fr in enumerate(tmeta["frames"]):
+            fp = fr.get("file_path") if isinstance(fr, dict) else None
+            if not isinstance(fp, str):
+                raise EigsError(test_json, f"frame {i} has no file_path")
+            name = Path(fp).name if Path(fp).suffix == ".png" else Path(fp).name + ".png"
+            m = re.fullmatch(r"r_(\d+)\.png", name)
+            if not m:
+                raise EigsError(test_json, f"frame {i}: file_path {fp!r} is not …/r_N")
+            k = int(m.group(1))
+            mats = _frame_matrices(test_json, fr, i, SYN_TEST_ENTRY + 1)
+            test_imgs.append(folder / "test" / name)
+            test_c2w.append(mats[SYN_TEST_ENTRY])
+            if k % 2 == 0:
+                if k // 2 >= n_views:
+                    raise EigsError(test_json, f"blur-view ground truth r_{k} has no training view {k // 2}")
+                test_kind.append(SHARP_KIND_BLUR_VIEW)
+                test_view.append(k // 2)
+            else:
+                test_kind.append(SHARP_KIND_NOVEL_VIEW)
+                test_view.append(-1)
+        if test_imgs:
+            images = read_images(test_imgs, desc="test images")
+            if images.shape[1:] != blurry.shape[1:]:
+                raise EigsError(
+                    folder / "test",
+                    f"test images are {images.shape[2]}×{images.shape[1]}×{images.shape[3]}, train images {w}×{h}×{c}",
+                )
+            c2w = blender_to_opencv(np.asarray(test_c2w))
+            kind = np.asarray(test_kind, dtype=np.uint8)
+            view = np.asarray(test_view, dtype=np.int64)
+            sharp = SharpImages(images, c2w, np.full(len(test_imgs), SYN_LATENT_T_US[0]), kind, view)
+            blur = np.flatnonzero(kind == SHARP_KIND_BLUR_VIEW)
+            diff = np.abs(c2w[blur] - latent[view[blur], 0]).max(initial=0.0)
+            if diff > POSE_TOL:
+                notes.append(
+                    f"blur-view ground-truth poses differ from the views' first latent poses by up to {diff:.3g}"
+                )
+    else:
+        notes.append("no transform_test.json: no sharp ground truth")
+
+    scene = Scene(
+        name=opts.name or folder.name,
+        camera=Camera(K=K, width=w, height=h, distortion=dist),
+        channels=c,
+        camera_response=opts.camera_response,
+        synthetic=True,
+        background=np.zeros(c),
+        contrast_threshold=opts.contrast_threshold,
+        source=f"e2nerf-synthetic:{folder}",
+        frames=Frames(blurry=blurry, exposure_us=np.tile(np.array(SYN_EXPOSURE_US, np.int64), (n_views, 1))),
+        binned=BinnedEvents(counts=counts, bin_edges_us=np.tile(SYN_BIN_EDGES_US, (n_views, 1))),
+        poses=Poses(latent, np.tile(SYN_LATENT_T_US, (n_views, 1)), "ground-truth"),
+        sharp=sharp,
+    )
+    notes.insert(0, f"calibration: {calib}")
+    return scene, notes
+
+
+def read_e2nerf_real(folder: Path, opts: IngestOptions) -> tuple[Scene, list[str]]:
+    """An E²NeRF real-world (LLFF) scene folder → (Scene, notes)."""
+    from eigs.io.images import read_images
+    from eigs.io.poses import llff_to_opencv
+
+    if not folder.is_dir():
+        raise EigsError(folder, "no such folder")
+    imgs = _numbered(folder / "images", r"(\d+)\.(?:jpg|JPG|jpeg|png)", "images NNN.jpg")
+    _check_sequence(folder / "images", list(imgs), REAL_POSES_PER_VIEW, "images")
+    nums = sorted(imgs)
+    n_views = len(nums)
+
+    pb_path = folder / "poses_bounds.npy"
+    if not pb_path.is_file():
+        raise EigsError(pb_path, "missing file")
+    try:
+        pb = np.load(pb_path, allow_pickle=False)
+    except Exception as err:
+        raise EigsError(pb_path, f"not a readable .npy array, truncated or corrupted ({type(err).__name__})") from None
+    if pb.ndim != 2 or pb.shape[1] != 17:
+        raise EigsError(pb_path, f"has shape {'×'.join(map(str, pb.shape))}, expected N×17 (LLFF rows)")
+    if pb.shape[0] != REAL_POSES_PER_VIEW * n_views:
+        raise EigsError(
+            pb_path,
+            f"has {pb.shape[0]} poses but images/ has {n_views} images (expected {REAL_POSES_PER_VIEW}·{n_views} = "
+            f"{REAL_POSES_PER_VIEW * n_views})",
+        )
+    pb = pb.astype(np.float64)
+    if not np.all(np.isfinite(pb)):
+        raise EigsError(pb_path, f"has NaN/Inf (first in row {int(np.flatnonzero(~np.isfinite(pb).all(1))[0])})")
+    hwf = pb[:, :15].reshape(-1, 3, 5)[:, :, 4]
+    if np.any(np.abs(hwf - hwf[0]) > 1e-9 * np.abs(hwf[0])):
+        raise EigsError(pb_path, "rows disagree on the camera (h, w, focal): one shared camera expected")
+
+    blurry = read_images([imgs[n] for n in nums], desc="images")
+    _, h, w, c = blurry.shape
+    fh, fw, focal = (float(v) for v in hwf[0])
+    if (fh, fw) != (float(h), float(w)):
+        raise EigsError(pb_path, f"hwf says {fw:g}×{fh:g} but the images are {w}×{h}")
+    if not focal > 0:
+        raise EigsError(pb_path, f"focal length {focal} is not positive")
+    K = np.array([[focal, 0.0, w / 2], [0.0, focal, h / 2], [0.0, 0.0, 1.0]])
+    K, dist, calib = _intrinsics_override(opts, K, f"{pb_path.name} hwf (focal {focal:g}, principal point W/2, H/2)")
+    latent = llff_to_opencv(pb).reshape(n_views, REAL_POSES_PER_VIEW, 4, 4)
+
+    names = [folder / "events.pt", folder / "event.pt"]
+    present = [p for p in names if p.is_file()]
+    if len(present) == 2:
+        raise EigsError(folder, "holds both events.pt and event.pt; keep one")
+    if not present:
+        raise EigsError(names[0], "missing event tensor (events.pt or event.pt)")
+    counts = load_event_tensor(present[0], n_views, h, w)
+
+    scene = Scene(
+        name=opts.name or folder.name,
+        camera=Camera(K=K, width=w, height=h, distortion=dist),
+        channels=c,
+        camera_response=opts.camera_response,
+        synthetic=False,
+        contrast_threshold=opts.contrast_threshold,
+        source=f"e2nerf-real:{folder}",
+        frames=Frames(blurry=blurry, exposure_us=np.tile(np.array(REAL_EXPOSURE_US, np.int64), (n_views, 1))),
+        binned=BinnedEvents(counts=counts, bin_edges_us=np.tile(REAL_BIN_EDGES_US, (n_views, 1))),
+        poses=Poses(latent, np.tile(REAL_LATENT_T_US, (n_views, 1)), "estimated"),
+    )
+    return scene, [f"calibration: {calib}"]
+
+
+def select_views(scene: Scene, idx: np.ndarray) -> Scene:
+    """Keep training views ``idx`` (M,) of an in-memory scene: frames, binned events, poses; blur-view ground
+    truth of dropped views is dropped, the rest renumbered; novel views are kept."""
+    s = Scene(**scene.__dict__)
+    if s.frames is not None:
+        ex = s.frames.exposure_us
+        s.frames = Frames(s.frames.blurry[idx], None if ex is None else ex[idx])
+    if s.binned is not None:
+        s.binned = BinnedEvents(s.binned.counts[idx], s.binned.bin_edges_us[idx])
+    if s.poses is not None:
+        s.poses = Poses(s.poses.latent_c2w[idx], s.poses.latent_t_us[idx], s.poses.source)
+    if s.sharp is not None:
+        new = np.full(scene.n_views, -1, dtype=np.int64)
+        new[idx] = np.arange(idx.size)
+        sh = s.sharp
+        is_blur = sh.kind == SHARP_KIND_BLUR_VIEW
+        keep = ~is_blur | (new[np.where(is_blur, sh.view, 0)] >= 0)
+        view = np.where(is_blur, new[np.where(is_blur, sh.view, 0)], -1)[keep]
+        s.sharp = SharpImages(sh.images[keep], sh.c2w[keep], sh.t_us[keep], sh.kind[keep], view)
+    return s
+
+
+def ingest_e2nerf(fmt: str, source: str, out: str | Path, opts: IngestOptions) -> str:
+    """Read an E²NeRF layout and write the scene atomically; returns the summary."""
+    from eigs.scene import summarize, write_scene
+
+    opts.refuse(fmt, "exposure_us", "time_window", "keep_events", "groundtruth", "time_unit", "frames", "sensor_size")
+    folder = Path(source)
+    if fmt == "e2nerf-synthetic":
+        scene, notes = read_e2nerf_synthetic(folder, opts)
+    else:
+        scene, notes = read_e2nerf_real(folder, opts)
+    if opts.views is not None:
+        scene = select_views(scene, parse_views(opts.views, scene.n_views))
+    write_scene(scene, out, compression=opts.compression)
+    lines = summarize(scene).splitlines()
+    gt = lines.pop()
+    return "\n".join([*lines, *(f"  {n}" if n.startswith("calibration") else f"  note: {n}" for n in notes), gt])
