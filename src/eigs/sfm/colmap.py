@@ -1,0 +1,302 @@
+"""A thin wrapper around pycolmap 4 (see ../shared/docs/platform.md §4): database, features, matching, mapping.
+
+Small frames are upsampled (integer factor, pixel-centre aligned) before SIFT so that 64–240 px images still
+yield enough features; the keypoints are scaled back before matching, so the database, the model and every
+reprojection error are in the original pixels and the image names are those of the original PNGs.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import shutil
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from eigs.errors import EigsError
+
+log = logging.getLogger(__name__)
+
+EXHAUSTIVE_MAX_IMAGES = 150  # beyond this, sequential + spatial matching
+FEATURE_TARGET_PX = 256  # upsample until the longer side reaches this (integer factor ≤ 4)
+
+
+@dataclass
+class ColmapOptions:
+    """Options of the COLMAP steps. ``matcher``: auto | exhaustive | sequential; ``feature_scale``: None for
+    automatic; ``device``: auto | cpu | cuda."""
+
+    matcher: str = "auto"
+    global_mapping: bool = False
+    refine_intrinsics: bool = False
+    feature_scale: int | None = None
+    max_num_features: int = 8192
+    sequential_overlap: int | None = None  # default: 3 views' worth of latent images
+    num_threads: int = 2
+    device: str = "auto"
+    seed: int = 0
+
+
+def quiet(verbose: bool = False) -> None:
+    """Route pycolmap's glog to stderr (the rule's log) and keep only warnings (everything with ``verbose``)."""
+    import pycolmap
+
+    pycolmap.logging.logtostderr = True
+    pycolmap.logging.minloglevel = 0 if verbose else 1
+    pycolmap.logging.verbose_level = 0
+
+
+def device(name: str):
+    """pycolmap Device: ``cuda`` only when pycolmap was built with it; ``auto`` picks it then, else CPU."""
+    import pycolmap
+
+    if name == "cuda" and not pycolmap.has_cuda:
+        raise EigsError(None, "--device cuda: this pycolmap build has no CUDA support")
+    if name == "cuda" or (name == "auto" and pycolmap.has_cuda):
+        return pycolmap.Device.cuda
+    return pycolmap.Device.cpu
+
+
+def feature_scale(width: int, height: int, requested: int | None = None) -> int:
+    """Integer upsampling factor for SIFT (1 = none)."""
+    if requested is not None:
+        return max(1, int(requested))
+    f = 1
+    while max(width, height) * f < FEATURE_TARGET_PX and f < 4:
+        f += 1
+    return f
+
+
+def camera_params(K: np.ndarray, distortion: np.ndarray | None, scale: float = 1.0) -> tuple[str, list[float]]:
+    """COLMAP model name and parameters for a pinhole K (pixel centres at j+0.5, as COLMAP) and OpenCV
+    distortion (k1, k2, p1, p2, k3); ``scale`` multiplies the focal lengths and principal point."""
+    fx, fy, cx, cy = (float(K[0, 0]) * scale, float(K[1, 1]) * scale, float(K[0, 2]) * scale, float(K[1, 2]) * scale)
+    d = np.zeros(5) if distortion is None else np.asarray(distortion, np.float64)
+    if not np.any(d != 0):
+        return "PINHOLE", [fx, fy, cx, cy]
+    if d[4] == 0:
+        return "OPENCV", [fx, fy, cx, cy, *map(float, d[:4])]
+    return "FULL_OPENCV", [fx, fy, cx, cy, *map(float, d[:4]), float(d[4]), 0.0, 0.0, 0.0]
+
+
+def make_camera(K: np.ndarray, width: int, height: int, distortion: np.ndarray | None, camera_id: int = 1):
+    import pycolmap
+
+    model, params = camera_params(K, distortion)
+    return pycolmap.Camera(model=model, width=int(width), height=int(height), params=params, camera_id=camera_id)
+
+
+def _upsampled_copies(src_dir: Path, names: Sequence[str], dst_dir: Path, f: int) -> None:
+    import cv2
+
+    dst_dir.mkdir(parents=True, exist_ok=True)
+    for name in names:
+        im = cv2.imread(str(src_dir / name), cv2.IMREAD_UNCHANGED)
+        if im is None:
+            raise EigsError(src_dir / name, "cannot read image")
+        up = cv2.resize(im, (im.shape[1] * f, im.shape[0] * f), interpolation=cv2.INTER_CUBIC)
+        cv2.imwrite(str(dst_dir / name), up)
+
+
+def extract(
+    db_path: Path,
+    image_dir: Path,
+    names: Sequence[str],
+    K: np.ndarray,
+    width: int,
+    height: int,
+    distortion: np.ndarray | None,
+    work_dir: Path,
+    opts: ColmapOptions,
+) -> dict[str, int]:
+    """Extract SIFT features of ``names`` (files in ``image_dir``) into the database with one shared camera for
+    them (a database that already holds images gets a second camera with the same parameters). Returns
+    name → image id."""
+    import pycolmap
+
+    missing = [n for n in names if not (image_dir / n).is_file()]
+    if missing:
+        raise EigsError(image_dir, f"{len(missing)} image(s) missing, e.g. {missing[0]}")
+    f = feature_scale(width, height, opts.feature_scale)
+    src = image_dir
+    if f > 1:
+        src = work_dir / f"features_x{f}"
+        _upsampled_copies(image_dir, names, src, f)
+    reader = pycolmap.ImageReaderOptions()
+    model, params = camera_params(K, distortion, scale=f)
+    reader.camera_model = model
+    reader.camera_params = ",".join(f"{p:.10g}" for p in params)
+    ext = pycolmap.FeatureExtractionOptions()
+    ext.num_threads = opts.num_threads
+    ext.sift.max_num_features = opts.max_num_features
+    ext.max_image_size = max(4096, max(width, height) * f)
+    pycolmap.extract_features(
+        db_path,
+        src,
+        image_names=list(names),
+        camera_mode=pycolmap.CameraMode.SINGLE,
+        reader_options=reader,
+        extraction_options=ext,
+        device=device(opts.device),
+    )
+    db = pycolmap.Database.open(db_path)
+    try:
+        wanted = set(names)
+        images = [im for im in db.read_all_images() if im.name in wanted]
+        ids = {im.name: im.image_id for im in images}
+        if f > 1:
+            for image_id in ids.values():
+                kp = np.asarray(db.read_keypoints(image_id), np.float32)
+                if kp.size:
+                    kp = kp.copy()
+                    kp[:, :2] /= f  # pixel-centre aligned upsampling: x_orig = x_up / f exactly
+                    kp[:, 2:] /= f  # affine shape (a11 a12 a21 a22)
+                    db.update_keypoints(image_id, kp)
+            new_cams = {im.camera_id for im in images}
+            for cam in db.read_all_cameras():
+                if cam.camera_id in new_cams:
+                    model, params = camera_params(K, distortion)
+                    cam.width, cam.height, cam.params = int(width), int(height), params
+                    db.update_camera(cam)
+        n_kp = [db.num_keypoints_for_image(i) for i in ids.values()]
+    finally:
+        db.close()
+    if f > 1:
+        shutil.rmtree(src, ignore_errors=True)
+    log.info(
+        "features: %d images (SIFT at ×%d), %d keypoints per image (median), %d with fewer than 50",
+        len(ids),
+        f,
+        int(np.median(n_kp)) if n_kp else 0,
+        sum(n < 50 for n in n_kp),
+    )
+    return ids
+
+
+def write_position_priors(db_path: Path, positions: dict[int, np.ndarray]) -> None:
+    """Store camera centres (image id → (3,)) as pose priors for spatial matching."""
+    import pycolmap
+
+    db = pycolmap.Database.open(db_path)
+    try:
+        db.clear_pose_priors()
+        data_ids = {im.image_id: im.data_id for im in db.read_all_images()}
+        for image_id, pos in positions.items():
+            if image_id not in data_ids:
+                continue
+            prior = pycolmap.PosePrior()
+            prior.position = np.asarray(pos, np.float64).reshape(3, 1)
+            prior.coordinate_system = pycolmap.PosePriorCoordinateSystem.CARTESIAN
+            prior.corr_data_id = data_ids[image_id]
+            db.write_pose_prior(prior)
+    finally:
+        db.close()
+
+
+def match(db_path: Path, n_images: int, n_latent: int, opts: ColmapOptions, *, spatial: bool = False) -> str:
+    """Match features: exhaustive up to :data:`EXHAUSTIVE_MAX_IMAGES` images, else sequential in (view, k)
+    name order; ``spatial`` adds pose-prior (spatial) matching. Returns the matcher used."""
+    import pycolmap
+
+    kind = opts.matcher
+    if kind == "auto":
+        kind = "exhaustive" if n_images <= EXHAUSTIVE_MAX_IMAGES else "sequential"
+    m = pycolmap.FeatureMatchingOptions()
+    m.num_threads = opts.num_threads
+    dev = device(opts.device)
+    if spatial:
+        pairing = pycolmap.SpatialPairingOptions()
+        pairing.max_num_neighbors = max(20, 4 * n_latent)
+        pairing.num_threads = opts.num_threads
+        pycolmap.match_spatial(db_path, matching_options=m, pairing_options=pairing, device=dev)
+        return "spatial"
+    if kind == "exhaustive":
+        pycolmap.match_exhaustive(db_path, matching_options=m, device=dev)
+    elif kind == "sequential":
+        pairing = pycolmap.SequentialPairingOptions()
+        pairing.overlap = opts.sequential_overlap or max(10, 3 * n_latent)
+        pairing.quadratic_overlap = True
+        pairing.num_threads = opts.num_threads
+        pycolmap.match_sequential(db_path, matching_options=m, pairing_options=pairing, device=dev)
+    else:
+        raise EigsError(None, f"unknown matcher {opts.matcher!r} (auto, exhaustive or sequential)")
+    return kind
+
+
+@dataclass
+class MappingResult:
+    reconstruction: object  # pycolmap.Reconstruction, the largest model
+    model_sizes: list[int]  # registered images per model, largest first
+    lost_to_other_models: int  # images registered only in models other than the kept one
+
+
+def map_images(
+    db_path: Path, image_dir: Path, out_dir: Path, opts: ColmapOptions, *, fixed_intrinsics: bool = True
+) -> MappingResult:
+    """Incremental (or global) mapping; keeps the model with the most registered images."""
+    import pycolmap
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    if opts.global_mapping:
+        g = pycolmap.GlobalPipelineOptions()
+        g.num_threads = opts.num_threads
+        g.random_seed = opts.seed
+        recs = pycolmap.global_mapping(db_path, image_dir, out_dir, options=g)
+    else:
+        o = pycolmap.IncrementalPipelineOptions()
+        o.num_threads = opts.num_threads
+        o.random_seed = opts.seed
+        refine = opts.refine_intrinsics or not fixed_intrinsics
+        o.ba_refine_focal_length = refine
+        o.ba_refine_extra_params = refine
+        o.ba_refine_principal_point = False
+        o.multiple_models = True
+        o.min_model_size = 3
+        recs = pycolmap.incremental_mapping(db_path, image_dir, out_dir, options=o)
+    models = sorted(recs.values(), key=lambda r: r.num_reg_images(), reverse=True)
+    if not models:
+        return MappingResult(None, [], 0)
+    kept = {im.name for im in models[0].images.values() if im.has_pose}
+    # models may overlap; a split means images registered elsewhere but not in the largest model
+    elsewhere = {im.name for r in models[1:] for im in r.images.values() if im.has_pose} - kept
+    sizes = [int(r.num_reg_images()) for r in models]
+    if elsewhere:
+        log.warning(
+            "COLMAP split the scene into %d models (%s registered images): keeping the largest; %d images "
+            "registered only in the others are treated as unregistered",
+            len(models),
+            ", ".join(map(str, sizes)),
+            len(elsewhere),
+        )
+    return MappingResult(models[0], sizes, len(elsewhere))
+
+
+def c2w_of(image) -> np.ndarray:
+    """Camera-to-world 4×4 (OpenCV axes, as COLMAP) of a registered pycolmap Image."""
+    m = np.eye(4)
+    m[:3, :4] = image.cam_from_world().matrix()
+    return np.linalg.inv(m)
+
+
+def rigid_from_c2w(c2w: np.ndarray):
+    """pycolmap.Rigid3d (cam_from_world) of a camera-to-world 4×4."""
+    import pycolmap
+
+    w2c = np.linalg.inv(np.asarray(c2w, np.float64))
+    R = w2c[:3, :3]
+    u, _, vt = np.linalg.svd(R)  # re-orthonormalise (float noise from the inverse)
+    return pycolmap.Rigid3d(pycolmap.Rotation3d(u @ vt), w2c[:3, 3].copy())
+
+
+def sim3d(scale: float, R: np.ndarray, t: np.ndarray):
+    import pycolmap
+
+    return pycolmap.Sim3d(float(scale), pycolmap.Rotation3d(np.asarray(R, np.float64)), np.asarray(t, np.float64))
+
+
+def remove_files(paths: Sequence[os.PathLike]) -> None:
+    for p in paths:
+        Path(p).unlink(missing_ok=True)

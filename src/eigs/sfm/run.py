@@ -1,0 +1,536 @@
+"""The SfM stage: scene + EDI latent frames → ``sfm/`` (COLMAP model, poses.h5, test_cameras.h5, report.json).
+
+Phases: choose the mode → features → matching → mapping (COLMAP mode) or fixed-pose triangulation (given
+mode) → registration check → canonical frame → fill unregistered latents within their view → accuracy
+against ground truth → test cameras → write. See docs/sfm.md.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import shutil
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from eigs.errors import EigsError
+from eigs.sfm.colmap import ColmapOptions
+
+log = logging.getLogger(__name__)
+
+MODES = ("auto", "colmap", "given")
+
+
+@dataclass
+class SfmConfig:
+    """Stage options. ``min_registered_fraction``: of the images given to COLMAP, below which the stage stops;
+    ``interpolate_unregistered``: fill unregistered latents from registered latents of the same view."""
+
+    mode: str = "auto"
+    allow_given: bool = True
+    min_registered_fraction: float = 0.5
+    interpolate_unregistered: bool = True
+    register_test: bool = True
+    keep_work: bool = False
+    verbose: bool = False
+    plot: bool = True
+    colmap: ColmapOptions = field(default_factory=ColmapOptions)
+
+
+class _Timer:
+    def __init__(self) -> None:
+        self.times: dict[str, float] = {}
+
+    def __call__(self, name: str):
+        timer = self
+
+        class _Ctx:
+            def __enter__(self):
+                self.t0 = time.perf_counter()
+                log.info("%s …", name)
+
+            def __exit__(self, *exc):
+                timer.times[name] = round(time.perf_counter() - self.t0, 3)
+
+        return _Ctx()
+
+
+def _write_png(path: Path, image: np.ndarray) -> None:
+    import cv2
+
+    im = np.asarray(image)
+    if im.dtype != np.uint8:
+        im = (np.clip(im, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
+    if im.ndim == 3 and im.shape[2] == 3:
+        im = cv2.cvtColor(im, cv2.COLOR_RGB2BGR)
+    elif im.ndim == 3:
+        im = im[..., 0]
+    if not cv2.imwrite(str(path), im):
+        raise EigsError(path, "cannot write image")
+
+
+def resolve_mode(cfg: SfmConfig, scene, path: str) -> tuple[str, str]:
+    """``(mode, reason)``; raises when ``given`` is requested but the scene has no poses."""
+    if cfg.mode not in MODES:
+        raise EigsError(None, f"unknown mode {cfg.mode!r} (auto, colmap or given)")
+    has_gt = scene.poses is not None and scene.poses.source == "ground-truth"
+    if cfg.mode == "given":
+        if scene.poses is None and scene.trajectory is None:
+            raise EigsError(path, "--mode given: the scene has no latent poses and no trajectory (use --mode colmap)")
+        return "given", "requested"
+    if cfg.mode == "colmap":
+        return "colmap", "requested"
+    if has_gt and cfg.allow_given:
+        return "given", "auto: the scene's latent poses are ground truth and given poses are allowed"
+    if has_gt:
+        return "colmap", "auto: the scene has ground-truth poses but given poses are not allowed"
+    return "colmap", "auto: the scene has no ground-truth latent poses"
+
+
+def _remedies(mode: str) -> str:
+    tips = [
+        "more latent frames (raise the number of bins, `edi: bins:`)",
+        "an estimated contrast threshold for EDI (sharper latent frames)",
+        "a lower `sfm: min_registered_fraction`",
+    ]
+    if mode == "colmap":
+        tips.append("given poses (`--mode given`) when the scene has them")
+        tips.append("another matcher (`--matcher exhaustive`) or `--global-mapping`")
+    return "; ".join(tips)
+
+
+def run_sfm(
+    scene_path: str | os.PathLike,
+    edi_path: str | os.PathLike,
+    out_dir: str | os.PathLike,
+    *,
+    latent_dir: str | os.PathLike | None = None,
+    cfg: SfmConfig | None = None,
+) -> dict:
+    """Run the stage and write ``out_dir`` atomically. Returns the report (also in ``report.json``)."""
+    from eigs.events.edi_file import latent_png_name, read_edi
+    from eigs.scene import io as scene_io
+    from eigs.sfm import colmap as cm
+    from eigs.util.atomic import atomic_path
+
+    cfg = cfg or SfmConfig()
+    cm.quiet(cfg.verbose)
+    timer = _Timer()
+    scene_path, edi_path = Path(scene_path), Path(edi_path)
+    with timer("read inputs"):
+        scene = scene_io.read_scene(scene_path, events=False)
+        edi = read_edi(edi_path, latent=False)
+    if edi.n_views != scene.n_views:
+        raise EigsError(edi_path, f"EDI has {edi.n_views} views but the scene {scene.n_views} (rerun edi)")
+    cam = scene.camera
+    V, L = edi.n_views, edi.n_bins + 1
+    if V == 0:
+        raise EigsError(scene_path, "the scene has no training views")
+    mode, reason = resolve_mode(cfg, scene, str(scene_path))
+    log.info("mode: %s (%s); %d views × %d latent frames", mode, reason, V, L)
+    slots = [(v, k) for v in range(V) for k in (range(1) if edi.sharp[v] else range(L))]
+    names = [latent_png_name(v, k) for v, k in slots]
+    report: dict = {
+        "scene": scene.name,
+        "mode": mode,
+        "mode_reason": reason,
+        "views": V,
+        "latent_per_view": L,
+        "sharp_views": [int(v) for v in np.flatnonzero(edi.sharp)],
+    }
+
+    out_dir = Path(out_dir)
+    with atomic_path(out_dir, directory=True) as tmp:
+        work = tmp / "work"
+        work.mkdir()
+        # -- images ------------------------------------------------------------------------------
+        ldir = Path(latent_dir) if latent_dir is not None else edi_path.parent / "latent"
+        if not all((ldir / n).is_file() for n in names):
+            log.info("latent PNGs not found in %s: writing them from %s", ldir, edi_path)
+            full = read_edi(edi_path)
+            ldir = work / "latent"
+            ldir.mkdir()
+            for (v, k), n in zip(slots, names, strict=True):
+                _write_png(ldir / n, full.latent[v, k])
+            del full
+        import cv2
+
+        probe = cv2.imread(str(ldir / names[0]), cv2.IMREAD_UNCHANGED)
+        if probe is None or probe.shape[:2] != (cam.height, cam.width):
+            got = "unreadable" if probe is None else f"{probe.shape[1]}×{probe.shape[0]}"
+            raise EigsError(ldir / names[0], f"latent frame is {got}, the camera is {cam.width}×{cam.height}")
+        db = work / "database.db"
+        opts = cfg.colmap
+        with timer("features"):
+            name_to_id = cm.extract(db, ldir, names, cam.K, cam.width, cam.height, cam.distortion, work, opts)
+        report["feature_scale"] = cm.feature_scale(cam.width, cam.height, opts.feature_scale)
+        with timer("matching"):
+            report["matcher"] = cm.match(db, len(names), L, opts)
+
+        # -- poses in the source (model) frame -------------------------------------------------------
+        raw = np.full((V, L, 4, 4), np.nan)
+        registered = np.zeros((V, L), bool)
+        if mode == "given":
+            got = _given_poses(scene, edi.timestamps_us, scene_path)
+            c2w_by_name = {n: got[v, k] for (v, k), n in zip(slots, names, strict=True)}
+            with timer("triangulation (poses fixed)"):
+                from eigs.sfm.given import triangulate
+
+                rec = triangulate(
+                    db,
+                    ldir,
+                    work / "tri",
+                    name_to_id,
+                    c2w_by_name,
+                    cam.K,
+                    cam.width,
+                    cam.height,
+                    cam.distortion,
+                    num_threads=opts.num_threads,
+                )
+            report["models"] = [len(names)]
+        else:
+            with timer("mapping"):
+                res = cm.map_images(db, ldir, work / "map", opts)
+                if res.reconstruction is not None and report["matcher"] == "sequential":
+                    res = _spatial_pass(db, ldir, work, res, slots, names, L, opts, timer)
+            report["models"] = res.model_sizes
+            if res.reconstruction is None:
+                raise EigsError(
+                    ldir,
+                    f"COLMAP reconstructed nothing from {len(names)} latent frames (too few features or matches). "
+                    f"Remedies: {_remedies(mode)}",
+                )
+            rec = res.reconstruction
+            if res.lost_to_other_models:
+                report["models_note"] = (
+                    f"COLMAP split the scene into {len(res.model_sizes)} models; the largest "
+                    f"({res.model_sizes[0]} images) was kept, {res.lost_to_other_models} images registered only "
+                    "in the others"
+                )
+        by_name = {im.name: im for im in rec.images.values() if im.has_pose}
+        for (v, k), n in zip(slots, names, strict=True):
+            if n in by_name:
+                raw[v, k] = cm.c2w_of(by_name[n])
+                registered[v, k] = True
+        for v in np.flatnonzero(edi.sharp):  # one image per sharp view: copy its pose to every slot
+            raw[v, :] = raw[v, 0]
+            registered[v, :] = registered[v, 0]
+        n_reg = sum(n in by_name for n in names)
+        frac = n_reg / len(names)
+        unreg = [n for n in names if n not in by_name]
+        report["registration"] = {
+            "images": len(names),
+            "registered": n_reg,
+            "fraction": frac,
+            "unregistered": unreg,
+        }
+        log.info("registered %d of %d latent frames (%.1f %%)", n_reg, len(names), 100 * frac)
+        if frac < cfg.min_registered_fraction:
+            shown = ", ".join(unreg[:8]) + (" …" if len(unreg) > 8 else "")
+            raise EigsError(
+                out_dir,
+                f"only {n_reg} of {len(names)} latent frames registered ({100 * frac:.0f} % < "
+                f"{100 * cfg.min_registered_fraction:.0f} %); unregistered: {shown}. Remedies: {_remedies(mode)}",
+            )
+
+        # -- canonical frame -------------------------------------------------------------------------
+        from eigs.sfm.canonical import canonical_transform, describe
+
+        canon = canonical_transform(raw[registered][:, :3, 3])
+        rec.transform(cm.sim3d(canon.scale, canon.R, canon.t))
+        c2w = np.where(registered[..., None, None], canon.apply_c2w(np.nan_to_num(raw)), np.nan)
+        report["canonical"] = describe(canon)
+
+        # -- unregistered latents --------------------------------------------------------------------
+        from eigs.sfm.poses import fill_within_views
+
+        interpolated = np.zeros((V, L), bool)
+        if (~registered).any() and cfg.interpolate_unregistered:
+            c2w, interpolated = fill_within_views(c2w, registered, edi.timestamps_us)
+        no_pose = [int(v) for v in range(V) if not np.all(np.isfinite(c2w[v]))]
+        report["registration"]["interpolated"] = [
+            latent_png_name(v, k) for v, k in zip(*np.nonzero(interpolated), strict=True)
+        ]
+        report["registration"]["views_without_all_poses"] = no_pose
+        if interpolated.any():
+            log.warning("%d unregistered latent frames interpolated within their view", int(interpolated.sum()))
+        if no_pose:
+            log.warning("views without a pose for every latent: %s", no_pose)
+        report["points"] = {
+            "count": int(rec.num_points3D()),
+            "mean_reprojection_error_px": float(rec.compute_mean_reprojection_error()),
+            "mean_track_length": float(rec.compute_mean_track_length()) if rec.num_points3D() else 0.0,
+        }
+
+        # -- accuracy against ground truth -----------------------------------------------------------
+        from eigs.sfm.given import latent_poses_at
+
+        gt = latent_poses_at(scene, edi.timestamps_us)
+        est_to_gt = None
+        if gt is not None:
+            est_to_gt, report["accuracy"] = _accuracy(c2w, registered, gt[0], edi.sharp)
+            report["accuracy"]["ground_truth"] = gt[1]
+            a = report["accuracy"]
+            log.info(
+                "accuracy: ATE %.4g (%.3f %% of extent %.4g), rotation error median %.3f°",
+                a["ate_rmse"],
+                a["ate_percent_of_extent"],
+                a["extent"],
+                a["rotation_error_deg_median"],
+            )
+
+        # -- test cameras ----------------------------------------------------------------------------
+        tc = None
+        if scene.sharp is not None and len(scene.sharp.t_us):
+            with timer("test cameras"):
+                tc, report["test_cameras"] = _test_cameras(scene, rec, db, work, mode, canon, est_to_gt, cfg, opts)
+        # -- write -----------------------------------------------------------------------------------
+        from eigs.sfm.artifacts import LatentPoses, write_poses, write_test_cameras
+
+        rec.write(tmp)
+        write_poses(
+            LatentPoses(
+                c2w=c2w,
+                timestamps_us=np.asarray(edi.timestamps_us, np.int64),
+                registered=registered,
+                interpolated=interpolated,
+                sharp=np.asarray(edi.sharp, bool),
+                K=np.asarray(cam.K, np.float64),
+                width=cam.width,
+                height=cam.height,
+                mode=mode,
+                canonical=canon.matrix(),
+            ),
+            tmp / "poses.h5",
+        )
+        if tc is not None:
+            write_test_cameras(tc, tmp / "test_cameras.h5")
+        report["timings_s"] = timer.times
+        if cfg.plot:
+            try:
+                _plot(tmp / "report.png", c2w, registered, gt[0] if gt is not None else None, est_to_gt, report)
+            except Exception as err:  # a plot never fails the stage
+                log.warning("plot failed: %s", err)
+        (tmp / "report.json").write_text(json.dumps(_jsonable(report), indent=2) + "\n")
+        if cfg.keep_work:
+            log.info("work files kept in %s", out_dir / "work")
+        else:
+            shutil.rmtree(work, ignore_errors=True)
+    log.info("wrote %s", out_dir)
+    return report
+
+
+def _given_poses(scene, timestamps_us: np.ndarray, path: Path) -> np.ndarray:
+    from eigs.sfm.given import latent_poses_at
+
+    got = latent_poses_at(scene, timestamps_us, ground_truth_only=False)
+    if got is None:
+        raise EigsError(path, "--mode given: the scene has no poses for these views (use --mode colmap)")
+    log.info("given poses: %s", got[1])
+    return got[0]
+
+
+def _spatial_pass(db, ldir, work, res, slots, names, L, opts, timer):
+    """Sequential matching misses pairs of views far apart in time: match spatial neighbours of the first
+    model's camera centres (unregistered images take a registered sibling's centre) and map again."""
+    from eigs.sfm import colmap as cm
+
+    rec = res.reconstruction
+    centre = {im.name: cm.c2w_of(im)[:3, 3] for im in rec.images.values() if im.has_pose}
+    view_centre: dict[int, np.ndarray] = {}
+    for (v, _k), n in zip(slots, names, strict=True):
+        if n in centre:
+            view_centre.setdefault(v, centre[n])
+    import pycolmap
+
+    d = pycolmap.Database.open(db)
+    try:
+        ids = {im.name: im.image_id for im in d.read_all_images()}
+    finally:
+        d.close()
+    positions = {}
+    for (v, _k), n in zip(slots, names, strict=True):
+        pos = centre.get(n, view_centre.get(v))
+        if pos is not None:
+            positions[ids[n]] = pos
+    cm.write_position_priors(db, positions)
+    cm.match(db, len(names), L, opts, spatial=True)
+    res2 = cm.map_images(db, ldir, work / "map2", opts)
+    if res2.reconstruction is not None and res2.model_sizes[0] >= res.model_sizes[0]:
+        return res2
+    return res
+
+
+def _accuracy(c2w, registered, gt, sharp) -> tuple:
+    """Sim(3) of registered latents onto ground truth, ATE, rotation errors, relative latent errors."""
+    from eigs.sfm.align import extent, latent_relative_errors, motion_ratio_per_view, trajectory_accuracy
+
+    ext = extent(gt.reshape(-1, 4, 4)[:, :3, 3])
+    acc = trajectory_accuracy(c2w[registered], gt[registered], gt_extent=ext)
+    out = acc.summary()
+    rel = latent_relative_errors(c2w, gt, acc.sim.scale, valid=registered)
+    moving = ~np.asarray(sharp, bool)
+    tr = motion_ratio_per_view(rel["t_err"][moving], rel["t_motion"][moving], 1e-6 * max(ext, 1e-12))
+    rr = motion_ratio_per_view(rel["r_err_deg"][moving], rel["r_motion_deg"][moving], 1e-4)
+
+    def med(a):
+        a = np.asarray(a, float)
+        a = a[np.isfinite(a)]
+        return float(np.median(a)) if a.size else float("nan")
+
+    out["relative_latent"] = {
+        "definition": "per view: median over k>=1 of the error of T0^-1 Tk against ground truth, divided by the "
+        "view's true intra-exposure motion (largest true |T0^-1 Tk|); then the median over views",
+        "views_compared": int(np.isfinite(tr).sum()),
+        "translation_ratio_median": med(tr),
+        "rotation_ratio_median": med(rr),
+        "translation_ratio_per_view": [None if not np.isfinite(x) else float(x) for x in tr],
+        "rotation_ratio_per_view": [None if not np.isfinite(x) else float(x) for x in rr],
+        "translation_error_median": med(rel["t_err"][moving][:, 1:]),
+        "rotation_error_deg_median": med(rel["r_err_deg"][moving][:, 1:]),
+        "true_translation_motion_median": med(rel["t_motion"][moving].max(axis=1)) if moving.any() else None,
+        "true_rotation_motion_deg_median": med(rel["r_motion_deg"][moving].max(axis=1)) if moving.any() else None,
+    }
+    return acc.sim, out
+
+
+def _test_cameras(scene, rec, db, work, mode, canon, est_to_gt, cfg, opts):
+    """Cameras of every ground-truth sharp image in the model (canonical) frame."""
+    from eigs.sfm.align import trajectory_accuracy, umeyama
+    from eigs.sfm.artifacts import METHOD_FALLBACK, METHOD_GIVEN, METHOD_REGISTERED, METHODS, TestCameras
+
+    sh = scene.sharp
+    cam = scene.camera
+    S = len(sh.t_us)
+    method = np.full(S, METHOD_FALLBACK, np.uint8)
+    err = np.full(S, np.nan)
+    n_in = np.zeros(S, np.int64)
+    # ground truth → model frame: (canonical est → gt)⁻¹ in COLMAP mode, the canonical transform in given mode
+    gt_to_model = canon if mode == "given" else (None if est_to_gt is None else est_to_gt.inverse())
+    guesses = gt_to_model.apply_c2w(sh.c2w) if gt_to_model is not None else np.full((S, 4, 4), np.nan)
+    c2w = guesses.copy()
+    summary: dict = {"count": S}
+    if mode == "given":
+        method[:] = METHOD_GIVEN
+    elif cfg.register_test:
+        tdir = work / "test"
+        tdir.mkdir()
+        tnames = [f"test_{i:04d}.png" for i in range(S)]
+        for i, n in enumerate(tnames):
+            _write_png(tdir / n, sh.images[i])
+        from eigs.sfm.register import register_images
+
+        regs = register_images(
+            rec, db, tdir, tnames, cam.K, cam.width, cam.height, cam.distortion, list(guesses), work, opts
+        )
+        for i, r in enumerate(regs):
+            n_in[i] = r.num_inliers
+            err[i] = r.reproj_px
+            if r.c2w is not None:
+                c2w[i] = r.c2w
+                method[i] = METHOD_REGISTERED
+        ok = method == METHOD_REGISTERED
+        if gt_to_model is None and ok.sum() >= 3:  # no latent ground truth: align with the registered ones
+            gt_to_model = umeyama(sh.c2w[ok][:, :3, 3], c2w[ok][:, :3, 3])
+            c2w[~ok] = gt_to_model.apply_c2w(sh.c2w[~ok])
+        if ok.any():
+            fin = err[ok]
+            summary["reprojection_error_px_median"] = float(np.median(fin))
+            summary["reprojection_error_px_max"] = float(np.max(fin))
+            summary["inliers_median"] = float(np.median(n_in[ok]))
+        if gt_to_model is not None and ok.sum() >= 1:
+            ref = gt_to_model.apply_c2w(sh.c2w[ok])
+            acc = trajectory_accuracy(c2w[ok], ref) if ok.sum() >= 3 else None
+            d = np.linalg.norm(c2w[ok][:, :3, 3] - ref[:, :3, 3], axis=1)
+            summary["registered_vs_mapped_ground_truth"] = {
+                "centre_distance_median_canonical": float(np.median(d)),
+                "rotation_deg_median": float(np.median(acc.rotation_errors_deg)) if acc else None,
+            }
+    if gt_to_model is None and np.any(method == METHOD_FALLBACK):
+        raise EigsError(
+            None,
+            f"{int(np.sum(method == METHOD_FALLBACK))} test camera(s) could not be registered and there is no "
+            "ground truth to place them (no latent ground-truth poses, fewer than 3 registered test images)",
+        )
+    summary.update({v: int(np.sum(method == k)) for k, v in METHODS.items()})
+    log.info(
+        "test cameras: %s",
+        ", ".join(f"{summary[v]} {v}" for v in METHODS.values() if summary[v]),
+    )
+    tc = TestCameras(
+        c2w=c2w,
+        K=np.tile(np.asarray(cam.K, np.float64), (S, 1, 1)),
+        width=cam.width,
+        height=cam.height,
+        index=np.arange(S, dtype=np.int64),
+        kind=np.asarray(sh.kind, np.uint8),
+        view=np.asarray(sh.view, np.int64),
+        t_us=np.asarray(sh.t_us, np.int64),
+        method=method,
+        reprojection_error_px=err,
+        num_inliers=n_in,
+    )
+    return tc, summary
+
+
+def _plot(path: Path, c2w, registered, gt, est_to_gt, report: dict) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    est = c2w.reshape(-1, 4, 4)
+    ok = np.all(np.isfinite(est), axis=(1, 2))
+    reg = registered.reshape(-1)
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.5))
+    ax = axes[0]
+    if gt is not None and est_to_gt is not None:
+        canon_gt = est_to_gt.inverse().apply_c2w(gt.reshape(-1, 4, 4))
+        g = canon_gt[:, :3, 3]
+        ax.plot(g[:, 0], g[:, 1], ".", color="0.6", ms=4, label="ground truth (aligned)")
+    e = est[ok][:, :3, 3]
+    ax.plot(e[reg[ok], 0], e[reg[ok], 1], "b.", ms=4, label="registered")
+    if (ok & ~reg).any():
+        ax.plot(est[ok & ~reg][:, 0, 3], est[ok & ~reg][:, 1, 3], "rx", ms=5, label="interpolated")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_title(f"camera centres (canonical x–y), mode {report['mode']}")
+    ax.legend(fontsize=8)
+    ax = axes[1]
+    rel = report.get("accuracy", {}).get("relative_latent")
+    if rel:
+        t = [np.nan if x is None else x for x in rel["translation_ratio_per_view"]]
+        r = [np.nan if x is None else x for x in rel["rotation_ratio_per_view"]]
+        x = np.arange(len(t))
+        ax.bar(x - 0.2, t, 0.4, label="translation")
+        ax.bar(x + 0.2, r, 0.4, label="rotation")
+        ax.axhline(0.25, color="k", lw=0.8, ls="--")
+        ax.set_xlabel("moving view")
+        ax.set_ylabel("relative-pose error / true intra-exposure motion")
+        ax.legend(fontsize=8)
+        a = report["accuracy"]
+        ax.set_title(
+            f"ATE {a['ate_percent_of_extent']:.3f} % of extent; rot. median {a['rotation_error_deg_median']:.3f}°"
+        )
+    else:
+        ax.axis("off")
+        ax.text(0.5, 0.5, "no ground truth", ha="center", va="center")
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def _jsonable(x):
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, np.generic):
+        return x.item()
+    if isinstance(x, float) and not np.isfinite(x):
+        return None
+    return x
