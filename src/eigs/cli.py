@@ -20,6 +20,7 @@ from eigs.errors import EigsError
 # subcommand name -> module path (in pipeline order)
 COMMANDS: dict[str, str] = {
     "scene": "eigs.scene.cli",
+    "synth": "eigs.synth.cli",
     "ingest": "eigs.io.cli",
     "metric": "eigs.metrics.cli",
     "resources": "eigs.metrics.resources_cli",

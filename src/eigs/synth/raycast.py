@@ -1,0 +1,360 @@
+"""A small vectorised NumPy ray caster of textured spheres, oriented boxes and capped cylinders.
+
+Independent of the Gaussian rasterizer on purpose: scenes made of analytic surfaces test our model under model
+mismatch. Shading is Lambertian under fixed world lights (view-independent, so a radiance field can represent
+it exactly), in **linear intensity**; textures come linearised from :mod:`eigs.synth.textures`.
+
+Camera conventions (as everywhere in eigs): camera-to-world 4×4 in OpenCV axes (x right, y down, z forward);
+intrinsics ``K`` with the centre of pixel (row i, column j) at image coordinates (j + 0.5, i + 0.5).
+
+Implementation: one frame at a time, rays in structure-of-arrays form on the supersampled grid; every ray of
+a frame shares the camera centre, so each primitive sees a scalar local origin. A primitive is only tested
+against the rays inside the screen rectangle that conservatively bounds its bounding sphere. No BLAS calls
+(small matrix products are slow and oversubscribe threads on shared machines).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from eigs.synth.textures import load_texture
+
+_EPS_T = 1e-4  # minimum ray parameter accepted as a hit (scene units)
+F32 = np.float32
+
+
+def rotation(axis: tuple[float, float, float] | np.ndarray, angle_deg: float) -> np.ndarray:
+    """(3, 3) float64 rotation about ``axis`` by ``angle_deg`` degrees (right-hand rule)."""
+    a = np.asarray(axis, dtype=np.float64)
+    a = a / max(float(np.linalg.norm(a)), 1e-12)
+    th = np.deg2rad(angle_deg)
+    k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    return np.eye(3) + np.sin(th) * k + (1 - np.cos(th)) * (k @ k)
+
+
+@dataclass
+class Material:
+    """Surface appearance: a texture (linear albedo) times ``tint``; ``tile``: world units per texture repeat."""
+
+    texture: str
+    tint: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    tile: float = 1.0
+
+
+Vec = tuple[np.ndarray, np.ndarray, np.ndarray]  # structure-of-arrays 3-vectors, each (M,) float32
+
+
+@dataclass
+class Primitive:
+    """Base class: a solid placed by ``center`` (3,) and ``rot`` (3, 3) local-to-world rotation."""
+
+    center: tuple[float, float, float]
+    material: Material
+    rot: np.ndarray = field(default_factory=lambda: np.eye(3))
+
+    def intersect(self, o: np.ndarray, d: Vec) -> np.ndarray:
+        """Ray parameter of the nearest hit ≥ ``_EPS_T`` per ray (+inf on a miss); ``o`` (3,) local origin shared
+        by all rays, ``d`` local directions."""
+        raise NotImplementedError
+
+    def surface(self, p: Vec) -> tuple[Vec, np.ndarray, np.ndarray]:
+        """Local normal and texture coordinates (u, v) in repeats at local surface points ``p``."""
+        raise NotImplementedError
+
+    def bound_radius(self) -> float:
+        raise NotImplementedError
+
+
+def _pick_t(t0: np.ndarray, t1: np.ndarray, ok: np.ndarray) -> np.ndarray:
+    t = np.where(t0 >= _EPS_T, t0, np.where(t1 >= _EPS_T, t1, np.inf))
+    return np.where(ok, t, np.inf).astype(F32)
+
+
+@dataclass
+class Sphere(Primitive):
+    radius: float = 0.5
+
+    def intersect(self, o: np.ndarray, d: Vec) -> np.ndarray:
+        dx, dy, dz = d
+        a = dx * dx + dy * dy + dz * dz
+        b = o[0] * dx + o[1] * dy + o[2] * dz
+        c = float(o @ o) - self.radius**2
+        disc = b * b - a * c
+        ok = disc >= 0
+        sq = np.sqrt(np.where(ok, disc, 0.0))
+        inv = 1.0 / np.maximum(a, 1e-20)
+        return _pick_t((-b - sq) * inv, (-b + sq) * inv, ok)
+
+    def surface(self, p: Vec) -> tuple[Vec, np.ndarray, np.ndarray]:
+        r = self.radius
+        n = (p[0] / r, p[1] / r, p[2] / r)
+        az = np.arctan2(n[1], n[0])
+        pol = np.arccos(np.clip(n[2], -1.0, 1.0))
+        s = r / self.material.tile
+        return n, az * s, pol * s
+
+    def bound_radius(self) -> float:
+        return float(self.radius)
+
+
+@dataclass
+class Box(Primitive):
+    half: tuple[float, float, float] = (0.5, 0.5, 0.5)
+
+    def intersect(self, o: np.ndarray, d: Vec) -> np.ndarray:
+        tmin = tmax = None
+        for ax in range(3):
+            h = self.half[ax]
+            da = d[ax]
+            inv = 1.0 / np.where(np.abs(da) < 1e-12, F32(1e-12), da)
+            ta = (-h - o[ax]) * inv
+            tb = (h - o[ax]) * inv
+            lo, hi = np.minimum(ta, tb), np.maximum(ta, tb)
+            tmin = lo if tmin is None else np.maximum(tmin, lo)
+            tmax = hi if tmax is None else np.minimum(tmax, hi)
+        hit = tmax >= np.maximum(tmin, _EPS_T)
+        return np.where(hit, np.where(tmin >= _EPS_T, tmin, tmax), np.inf).astype(F32)
+
+    def surface(self, p: Vec) -> tuple[Vec, np.ndarray, np.ndarray]:
+        q = np.stack([np.abs(p[k] / self.half[k]) for k in range(3)])
+        axis = q.argmax(axis=0)
+        zero = np.zeros_like(p[0])
+        n = tuple(np.where(axis == k, np.sign(p[k]), zero) for k in range(3))
+        tile = self.material.tile
+        # in-face coordinates: the two other axes in cyclic order; faces offset so they differ
+        u = np.choose(axis, (p[1], p[2], p[0])) / tile + 0.37 * axis
+        v = np.choose(axis, (p[2], p[0], p[1])) / tile + 0.21 * axis
+        return n, u, v
+
+    def bound_radius(self) -> float:
+        return float(np.linalg.norm(self.half))
+
+
+@dataclass
+class Cylinder(Primitive):
+    """Capped cylinder along local z: radius ``radius``, from z = −``half_height`` to +``half_height``."""
+
+    radius: float = 0.5
+    half_height: float = 0.5
+
+    def intersect(self, o: np.ndarray, d: Vec) -> np.ndarray:
+        r, hz = self.radius, self.half_height
+        dx, dy, dz = d
+        a = dx * dx + dy * dy
+        b = o[0] * dx + o[1] * dy
+        c = o[0] ** 2 + o[1] ** 2 - r * r
+        disc = b * b - a * c
+        ok = (disc >= 0) & (a > 1e-12)
+        sq = np.sqrt(np.where(ok, disc, 0.0))
+        inv = 1.0 / np.where(a > 1e-12, a, 1.0)
+        best = np.full(dx.shape, np.inf, dtype=F32)
+        for t in ((-b - sq) * inv, (-b + sq) * inv):
+            z = o[2] + t * dz
+            good = ok & (t >= _EPS_T) & (np.abs(z) <= hz) & (t < best)
+            best = np.where(good, t, best)
+        inv_z = 1.0 / np.where(np.abs(dz) < 1e-12, F32(1e-12), dz)
+        for zc in (-hz, hz):
+            t = (zc - o[2]) * inv_z
+            x = o[0] + t * dx
+            y = o[1] + t * dy
+            good = (t >= _EPS_T) & (x * x + y * y <= r * r) & (t < best)
+            best = np.where(good, t, best)
+        return best.astype(F32)
+
+    def surface(self, p: Vec) -> tuple[Vec, np.ndarray, np.ndarray]:
+        r, hz = self.radius, self.half_height
+        tile = self.material.tile
+        rad = np.sqrt(p[0] ** 2 + p[1] ** 2)
+        # a point is on a cap when it is nearer the cap plane than the side surface
+        on_cap = (hz - np.abs(p[2])) < (r - rad)
+        inv = 1.0 / np.maximum(rad, 1e-9)
+        zero = np.zeros_like(rad)
+        n = (np.where(on_cap, zero, p[0] * inv), np.where(on_cap, zero, p[1] * inv),
+             np.where(on_cap, np.sign(p[2]), zero))
+        az = np.arctan2(p[1], p[0])
+        u = np.where(on_cap, p[0] / tile + 0.5, az * (r / tile))
+        v = np.where(on_cap, p[1] / tile + 0.5, p[2] / tile)
+        return n, u, v
+
+    def bound_radius(self) -> float:
+        return float(np.hypot(self.radius, self.half_height))
+
+
+@dataclass
+class Lighting:
+    """Lambertian lighting: ``ambient`` + Σ gain·max(0, n·l). ``lights``: ((direction towards light (3,), gain), …)."""
+
+    ambient: float = 0.3
+    lights: tuple[tuple[tuple[float, float, float], float], ...] = (((0.4, -0.5, 1.0), 0.8), ((-0.6, 0.4, 0.3), 0.25))
+
+
+def sample_texture(tex: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Bilinear lookup with mirrored repeat. ``tex``: (S, S, 3); ``u``, ``v``: (M,) in repeats → (M, 3)."""
+    s = tex.shape[0]
+
+    def fold(c: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        m = np.mod(c * s - 0.5, 2 * s)
+        m = np.where(m >= s, 2 * s - 1 - m, m)  # mirror: texel s−1 meets texel s−1 of the reflected copy
+        m = np.clip(m, 0.0, s - 1.0)
+        i0 = m.astype(np.int64)
+        return i0, np.minimum(i0 + 1, s - 1), (m - i0).astype(F32)[:, None]
+
+    x0, x1, fx = fold(u)
+    y0, y1, fy = fold(v)
+    top = tex[y0, x0] * (1 - fx) + tex[y0, x1] * fx
+    bot = tex[y1, x0] * (1 - fx) + tex[y1, x1] * fx
+    return top * (1 - fy) + bot * fy
+
+
+@dataclass
+class RenderResult:
+    """``rgb``: (F, H, W, 3) float32 linear intensity in [0, 1]; ``depth``: (F, H, W) float32 z-depth of the
+    pixel-centre ray (+inf on background), only when requested."""
+
+    rgb: np.ndarray
+    depth: np.ndarray | None
+
+
+class RayCaster:
+    """Renders a list of primitives. ``background``: (3,) linear colour of rays that hit nothing."""
+
+    def __init__(
+        self,
+        primitives: list[Primitive],
+        *,
+        background: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        lighting: Lighting | None = None,
+        texture_size: int = 128,
+    ):
+        self.primitives = list(primitives)
+        self.background = np.asarray(background, dtype=F32)
+        self.lighting = lighting or Lighting()
+        self._lights = [
+            (np.asarray(dvec, np.float64) / np.linalg.norm(dvec), float(gain)) for dvec, gain in self.lighting.lights
+        ]
+        self._tex = [
+            (load_texture(p.material.texture, texture_size) * np.asarray(p.material.tint, F32)).astype(F32)
+            for p in self.primitives
+        ]
+        self._rot = [np.asarray(p.rot, dtype=np.float64) for p in self.primitives]
+        self._ctr = [np.asarray(p.center, dtype=np.float64) for p in self.primitives]
+        self._rad = [p.bound_radius() for p in self.primitives]
+
+    def _grid(self, K: np.ndarray, width: int, height: int, s: int) -> tuple[np.ndarray, np.ndarray]:
+        """Camera-frame ray directions (z = 1) on the supersampled grid: x, y each (H·s, W·s) float32."""
+        offs = (np.arange(s) + 0.5) / s
+        cols = (np.arange(width)[:, None] + offs[None, :]).ravel()
+        rows = (np.arange(height)[:, None] + offs[None, :]).ravel()
+        kinv = np.linalg.inv(np.asarray(K, dtype=np.float64))
+        # K is upper triangular: x = (c − cx − skew·y)/fx; y = (r − cy)/fy
+        yy = (rows - K[1, 2]) * kinv[1, 1]
+        xx = cols[None, :] * kinv[0, 0] + rows[:, None] * kinv[0, 1] + kinv[0, 2]
+        return xx.astype(F32), np.broadcast_to(yy[:, None], xx.shape).astype(F32)
+
+    def _screen_box(
+        self, k: int, w2c: np.ndarray, K: np.ndarray, gh: int, gw: int, s: int
+    ) -> tuple[int, int, int, int] | None:
+        """Rows/cols [r0, r1) × [c0, c1) of the supersampled grid that may see primitive k; None if none."""
+        c = w2c[:3, :3] @ self._ctr[k] + w2c[:3, 3]
+        r = self._rad[k] * 1.001 + 1e-6
+        if c[2] + r <= _EPS_T:
+            return None
+        if c[2] - r <= 1e-3:
+            return 0, gh, 0, gw
+        zs = (c[2] - r, c[2] + r)
+        xs = [(c[0] + a) / z for a in (-r, r) for z in zs]
+        ys = [(c[1] + a) / z for a in (-r, r) for z in zs]
+        x0 = (K[0, 0] * min(xs) + K[0, 1] * (min(ys) if K[0, 1] >= 0 else max(ys)) + K[0, 2]) * s
+        x1 = (K[0, 0] * max(xs) + K[0, 1] * (max(ys) if K[0, 1] >= 0 else min(ys)) + K[0, 2]) * s
+        y0 = (K[1, 1] * min(ys) + K[1, 2]) * s
+        y1 = (K[1, 1] * max(ys) + K[1, 2]) * s
+        c0, c1 = max(int(np.floor(x0)) - 1, 0), min(int(np.ceil(x1)) + 1, gw)
+        r0, r1 = max(int(np.floor(y0)) - 1, 0), min(int(np.ceil(y1)) + 1, gh)
+        if c0 >= c1 or r0 >= r1:
+            return None
+        return r0, r1, c0, c1
+
+    def _frame(
+        self, c2w: np.ndarray, K: np.ndarray, gx: np.ndarray, gy: np.ndarray, s: int, shade: bool = True
+    ) -> tuple[np.ndarray | None, np.ndarray]:
+        """One frame on the supersampled grid: (rgb (H·s, W·s, 3) or None, t (H·s, W·s) z-depth)."""
+        gh, gw = gx.shape
+        r_cam, o_w = c2w[:3, :3], c2w[:3, 3]
+        w2c = np.eye(4)
+        w2c[:3, :3], w2c[:3, 3] = r_cam.T, -r_cam.T @ o_w
+        best = np.full((gh, gw), np.inf, dtype=F32)
+        pid = np.full((gh, gw), -1, dtype=np.int16)
+        boxes: list[tuple[int, int, int, int] | None] = []
+        for k, prim in enumerate(self.primitives):
+            box = self._screen_box(k, w2c, K, gh, gw, s)
+            boxes.append(box)
+            if box is None:
+                continue
+            r0, r1, c0, c1 = box
+            a = self._rot[k].T @ r_cam  # camera → local
+            o_l = (self._rot[k].T @ (o_w - self._ctr[k])).astype(F32)
+            x, y = gx[r0:r1, c0:c1], gy[r0:r1, c0:c1]
+            d = tuple((F32(a[i, 0]) * x + F32(a[i, 1]) * y + F32(a[i, 2])) for i in range(3))
+            t = prim.intersect(o_l, d)
+            bv, pv = best[r0:r1, c0:c1], pid[r0:r1, c0:c1]
+            closer = t < bv
+            bv[closer] = t[closer]
+            pv[closer] = k
+        if not shade:
+            return None, best
+        out = np.empty((gh, gw, 3), dtype=F32)
+        out[:] = self.background
+        for k, prim in enumerate(self.primitives):
+            box = boxes[k]
+            if box is None:
+                continue
+            r0, r1, c0, c1 = box
+            mask = pid[r0:r1, c0:c1] == k
+            if not mask.any():
+                continue
+            x, y, t = gx[r0:r1, c0:c1][mask], gy[r0:r1, c0:c1][mask], best[r0:r1, c0:c1][mask]
+            a = self._rot[k].T @ r_cam
+            o_l = (self._rot[k].T @ (o_w - self._ctr[k])).astype(F32)
+            p = tuple(o_l[i] + t * (F32(a[i, 0]) * x + F32(a[i, 1]) * y + F32(a[i, 2])) for i in range(3))
+            n, u, v = prim.surface(p)
+            shade_k = np.full(t.shape, self.lighting.ambient, dtype=F32)
+            for ldir, gain in self._lights:
+                ll = (self._rot[k].T @ ldir).astype(F32)  # light direction in the local frame
+                shade_k += F32(gain) * np.maximum(n[0] * ll[0] + n[1] * ll[1] + n[2] * ll[2], 0.0)
+            col = sample_texture(self._tex[k], u, v) * shade_k[:, None]
+            out[r0:r1, c0:c1][mask] = col
+        np.clip(out, 0.0, 1.0, out=out)
+        return out, best
+
+    def render(
+        self,
+        c2w: np.ndarray,
+        K: np.ndarray,
+        width: int,
+        height: int,
+        *,
+        supersample: int = 2,
+        want_depth: bool = False,
+    ) -> RenderResult:
+        """Render F views. ``c2w``: (F, 4, 4) (or (4, 4)) OpenCV camera-to-world; ``K``: (3, 3).
+
+        Each pixel averages ``supersample``² stratified rays (box filter) in linear intensity. Returns (F, H, W, 3)
+        float32 images; with ``want_depth`` also the z-depth of one ray through each pixel centre.
+        """
+        c2w = np.asarray(c2w, dtype=np.float64)
+        if c2w.ndim == 2:
+            c2w = c2w[None]
+        K = np.asarray(K, dtype=np.float64)
+        s = max(int(supersample), 1)
+        gx, gy = self._grid(K, width, height, s)
+        rgb = np.empty((c2w.shape[0], height, width, 3), dtype=F32)
+        for f in range(c2w.shape[0]):
+            img, _ = self._frame(c2w[f], K, gx, gy, s)
+            rgb[f] = img.reshape(height, s, width, s, 3).mean(axis=(1, 3))
+        depth = None
+        if want_depth:
+            cx, cy = self._grid(K, width, height, 1)
+            depth = np.stack([self._frame(c2w[f], K, cx, cy, 1, shade=False)[1] for f in range(c2w.shape[0])])
+        return RenderResult(rgb, depth)

@@ -1,0 +1,80 @@
+"""Real photographs as textures: scikit-image's bundled sample images, linearised on load.
+
+Only images that ship inside the scikit-image wheel are used (never the ones it fetches on demand with pooch),
+so generation works offline. Every texture is converted sRGB → linear intensity once, here; the renderer
+works in linear intensity from then on (see docs/synthetic.md, "Intensity domain").
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+
+from eigs.errors import EigsError
+
+# name -> (skimage.data function, colour photo?). All of these ship in the wheel (skimage/data/*.png|jpg).
+_SOURCES: dict[str, str] = {
+    "astronaut": "astronaut",
+    "brick": "brick",
+    "camera": "camera",
+    "chelsea": "chelsea",
+    "coffee": "coffee",
+    "coins": "coins",
+    "colorwheel": "colorwheel",
+    "grass": "grass",
+    "gravel": "gravel",
+    "hubble": "hubble_deep_field",
+    "ihc": "immunohistochemistry",
+    "moon": "moon",
+    "retina": "retina",
+    "rocket": "rocket",
+    "text": "text",
+}
+TEXTURE_NAMES: tuple[str, ...] = tuple(sorted(_SOURCES))
+
+
+def srgb_to_linear(x: np.ndarray) -> np.ndarray:
+    """IEC 61966-2-1 sRGB decoding. ``x``: any shape, values in [0, 1] → linear intensity in [0, 1]."""
+    x = np.clip(x, 0.0, 1.0)
+    return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4)
+
+
+def linear_to_srgb(x: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`srgb_to_linear`. ``x``: linear intensity in [0, 1] → sRGB-encoded [0, 1]."""
+    x = np.clip(x, 0.0, 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
+
+
+def _load_raw(name: str) -> np.ndarray:
+    import skimage.data
+
+    if name not in _SOURCES:
+        raise EigsError(None, f"unknown texture {name!r}; available: {', '.join(TEXTURE_NAMES)}")
+    img = np.asarray(getattr(skimage.data, _SOURCES[name])())
+    if img.dtype == bool:
+        img = img.astype(np.uint8) * 255
+    if img.ndim == 2:
+        img = np.repeat(img[:, :, None], 3, axis=2)
+    return img[:, :, :3]
+
+
+@lru_cache(maxsize=64)
+def load_texture(name: str, size: int = 128) -> np.ndarray:
+    """Texture ``name`` as (size, size, 3) float32 **linear** intensity in [0, 1].
+
+    The photograph is centre-cropped to a square, low-pass resized to ``size`` (anti-aliased, so a texture seen
+    at ~1 texel per pixel does not shimmer) and sRGB-decoded. Grey photographs are replicated to 3 channels
+    (primitives may tint them). Cached; treat the result as read-only.
+    """
+    from skimage.transform import resize
+
+    img = _load_raw(name).astype(np.float64) / 255.0
+    h, w = img.shape[:2]
+    s = min(h, w)
+    y0, x0 = (h - s) // 2, (w - s) // 2
+    img = img[y0 : y0 + s, x0 : x0 + s]
+    img = resize(img, (size, size), order=1, anti_aliasing=True, mode="reflect")
+    out = srgb_to_linear(img).astype(np.float32)
+    out.setflags(write=False)
+    return out
