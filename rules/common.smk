@@ -43,3 +43,41 @@ def ingest_format(wildcards):
 
 def ingest_options(wildcards):
     return " ".join(SCENES[wildcards.scene].get("options", []))
+
+
+# --- sfm / init (rules/sfm.smk) -------------------------------------------------------------------------------
+ALL_SCENES = sorted(SCENES)
+
+
+def sfm_bins():
+    """The EDI bin counts (config `edi: bins:`), shared by every stage keyed by b{bins}."""
+    return [int(b) for b in config.get("edi", {}).get("bins", [4])]
+
+
+def sfm_options(wildcards):
+    """`eigs sfm` flags from the `sfm:` config section."""
+    s = config.get("sfm", {})
+    opts = [
+        f"--mode {s.get('mode', 'auto')}",
+        f"--matcher {s.get('matcher', 'auto')}",
+        f"--min-registered-fraction {float(s.get('min_registered_fraction', 0.5))}",
+    ]
+    if not s.get("allow_given", True):
+        opts.append("--no-given")
+    if not s.get("interpolate_unregistered", True):
+        opts.append("--no-interpolate")
+    if s.get("global_mapping", False):
+        opts.append("--global-mapping")
+    if s.get("refine_intrinsics", False):
+        opts.append("--refine-intrinsics")
+    if not s.get("register_test_cameras", True):
+        opts.append("--no-register-test")
+    return " ".join(opts)
+
+
+def init_options(wildcards):
+    s = config.get("init", {})
+    return (
+        f"--min-points {int(s.get('min_points', 1000))} --random {int(s.get('random', 10000))} "
+        f"--sh-degree {int(s.get('sh_degree', 3))}"
+    )

@@ -1,0 +1,59 @@
+# Camera poses of every EDI latent frame (COLMAP or given poses) and the initial Gaussians.
+
+
+rule sfm:
+    input:
+        scene="results/{scene}/scene.h5",
+        edi="results/{scene}/b{bins}/edi.h5",
+        latent="results/{scene}/b{bins}/latent",
+    output:
+        directory("results/{scene}/b{bins}/sfm"),
+    wildcard_constraints:
+        scene=names_regex(ALL_SCENES),
+        bins=r"\d+",
+    params:
+        options=sfm_options,
+    log:
+        "logs/sfm/{scene}_b{bins}.log",
+    benchmark:
+        "benchmarks/sfm/{scene}_b{bins}.tsv"
+    threads: threads_for("sfm")
+    resources:
+        mem_mb=6000,
+    conda:
+        "../workflow/envs/eigs.yaml"
+    shell:
+        "eigs sfm {input.scene} {input.edi} --latent-dir {input.latent} -o {output} {params.options} "
+        "--threads {threads} > {log} 2>&1"
+
+
+rule init:
+    input:
+        "results/{scene}/b{bins}/sfm",
+    output:
+        "results/{scene}/b{bins}/init.ply",
+    wildcard_constraints:
+        scene=names_regex(ALL_SCENES),
+        bins=r"\d+",
+    params:
+        options=init_options,
+    log:
+        "logs/init/{scene}_b{bins}.log",
+    benchmark:
+        "benchmarks/init/{scene}_b{bins}.tsv"
+    threads: 1
+    resources:
+        mem_mb=2000,
+    conda:
+        "../workflow/envs/eigs.yaml"
+    shell:
+        "eigs init {input} -o {output} {params.options} > {log} 2>&1"
+
+
+rule all_sfm:
+    input:
+        expand("results/{scene}/b{bins}/sfm", scene=ALL_SCENES, bins=sfm_bins()),
+        expand("results/{scene}/b{bins}/init.ply", scene=ALL_SCENES, bins=sfm_bins()),
+
+
+STAGE_TARGETS.extend(rules.all_sfm.input)
