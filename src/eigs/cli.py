@@ -22,6 +22,8 @@ COMMANDS: dict[str, str] = {
     "scene": "eigs.scene.cli",
     "synth": "eigs.synth.cli",
     "ingest": "eigs.io.cli",
+    "sfm": "eigs.sfm.cli",
+    "init": "eigs.sfm.init_cli",
     "metric": "eigs.metrics.cli",
     "resources": "eigs.metrics.resources_cli",
 }
