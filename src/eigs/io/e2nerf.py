@@ -88,7 +88,7 @@ def load_event_tensor(path: Path, n_views: int, height: int, width: int) -> np.n
             if np.any(frac):
                 b, i, j = (int(k[0]) for k in np.nonzero(frac))
                 raise EigsError(
-                    path, f"count {a[b, i, j]!r} at view {v}, bin {b}, pixel (x={j}, y={i}) is not an integer"
+                    path, f"count {float(a[b, i, j])!r} at view {v}, bin {b}, pixel (x={j}, y={i}) is not an integer"
                 )
         if a.size and (a.max() > np.iinfo(np.int32).max or a.min() < np.iinfo(np.int32).min):
             raise EigsError(path, f"view {v} has counts beyond int32")
@@ -159,12 +159,13 @@ def _numbered(folder: Path, pattern: str, what: str) -> dict[int, Path]:
 
 
 def _check_sequence(folder: Path, numbers: list[int], step: int, what: str) -> None:
-    want = list(range(0, step * len(numbers), step))
-    if sorted(numbers) != want:
-        missing = sorted(set(want) - set(numbers))
-        extra = sorted(set(numbers) - set(want))
-        detail = f"missing {missing[:5]}" if missing else f"unexpected {extra[:5]}"
-        raise EigsError(folder, f"{what} must be numbered 0, {step}, …, {want[-1]} without gaps ({detail})")
+    """``numbers`` must be exactly 0, step, 2·step, … (view i is number step·i)."""
+    odd = sorted(n for n in numbers if n % step)
+    if odd:
+        raise EigsError(folder, f"{what} must be numbered 0, {step}, {2 * step}, …; found {odd[:5]}")
+    missing = sorted(set(range(0, max(numbers) + 1, step)) - set(numbers))
+    if missing:
+        raise EigsError(folder, f"{what} must be numbered 0, {step}, {2 * step}, … without gaps; missing {missing[:5]}")
 
 
 def _intrinsics_override(opts: IngestOptions, K: np.ndarray, source_desc: str) -> tuple[np.ndarray, np.ndarray, str]:

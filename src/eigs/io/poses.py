@@ -66,7 +66,9 @@ def read_groundtruth(path: Path) -> Trajectory:
     if back.size:
         i = int(back[0]) + 1
         raise EigsError(
-            path, f"timestamps go backwards or repeat at pose {i} ({rows[i, 0]!r} s after {rows[i - 1, 0]!r} s)"
+            path,
+            f"timestamps go backwards or repeat at pose {i} "
+            f"({float(rows[i, 0])!r} s after {float(rows[i - 1, 0])!r} s)",
         )
     q = rows[:, 4:8]
     norm = np.linalg.norm(q, axis=1)

@@ -51,7 +51,7 @@ def to_us(t: np.ndarray, unit: str, where: str, offset: int = 0) -> np.ndarray:
         i = int(np.argmax(off))
         raise EigsError(
             where,
-            f"float timestamp {tf[i]!r} {unit} (event {offset + i}) is too large to convert to µs exactly "
+            f"float timestamp {float(tf[i])!r} {unit} (event {offset + i}) is too large to convert to µs exactly "
             "(float64 resolution); store integer timestamps",
         )
     return ri.astype(np.int64)
