@@ -37,7 +37,14 @@ eigs::Camera<S> make_camera(const Tensor& viewmat, const Tensor& K, int64_t widt
     return cam;
 }
 
-int threads() { return std::max(1, at::get_num_threads()); }
+// Threads for a parallel loop of `work` units: at most torch's setting, and one thread per `grain` units
+// (waking a team costs far more than a small loop, notably on a loaded machine).
+int threads(int64_t work, int64_t grain) {
+    const int64_t by_work = std::max<int64_t>(1, work / std::max<int64_t>(1, grain));
+    return int(std::max<int64_t>(1, std::min<int64_t>(at::get_num_threads(), by_work)));
+}
+
+int64_t n_tiles_of(int64_t width, int64_t height) { return ((width + 15) / 16) * ((height + 15) / 16); }
 
 std::tuple<Tensor, Tensor, Tensor, Tensor, Tensor> project_fwd(Tensor means, Tensor quats, Tensor scales,
                                                                 Tensor opacities, Tensor viewmat, Tensor K,
@@ -57,7 +64,7 @@ std::tuple<Tensor, Tensor, Tensor, Tensor, Tensor> project_fwd(Tensor means, Ten
                                         scales.data_ptr<scalar_t>(), opacities.data_ptr<scalar_t>(), cam,
                                         means2d.data_ptr<scalar_t>(), conics.data_ptr<scalar_t>(),
                                         depths.data_ptr<scalar_t>(), extents.data_ptr<scalar_t>(),
-                                        radii.data_ptr<int32_t>(), threads());
+                                        radii.data_ptr<int32_t>(), threads(n, 2048));
     });
     return {means2d, conics, depths, extents, radii};
 }
@@ -80,7 +87,7 @@ std::tuple<Tensor, Tensor, Tensor> project_bwd(Tensor means, Tensor quats, Tenso
                                          scales.data_ptr<scalar_t>(), cam, radii.data_ptr<int32_t>(),
                                          v_means2d.data_ptr<scalar_t>(), v_conics.data_ptr<scalar_t>(),
                                          v_means.data_ptr<scalar_t>(), v_quats.data_ptr<scalar_t>(),
-                                         v_scales.data_ptr<scalar_t>(), threads());
+                                         v_scales.data_ptr<scalar_t>(), threads(n, 2048));
     });
     return {v_means, v_quats, v_scales};
 }
@@ -132,7 +139,8 @@ std::tuple<Tensor, Tensor, Tensor> rasterize_fwd(Tensor means2d, Tensor conics, 
             means2d.data_ptr<scalar_t>(), conics.data_ptr<scalar_t>(), colors.data_ptr<scalar_t>(),
             opacities.data_ptr<scalar_t>(), extents.data_ptr<scalar_t>(), background.data_ptr<scalar_t>(), d,
             width, height, tile_offsets.data_ptr<int64_t>(), flatten_ids.data_ptr<int64_t>(),
-            image.data_ptr<scalar_t>(), trans.data_ptr<scalar_t>(), last.data_ptr<int32_t>(), threads(),
+            image.data_ptr<scalar_t>(), trans.data_ptr<scalar_t>(), last.data_ptr<int32_t>(),
+            threads(std::min(n_tiles_of(width, height), flatten_ids.size(0) / 16 + 1), 1),
             int(isa));
     });
     return {image, trans, last};
@@ -166,7 +174,7 @@ std::tuple<Tensor, Tensor, Tensor, Tensor> rasterize_bwd(Tensor means2d, Tensor 
             trans.data_ptr<scalar_t>(), last.data_ptr<int32_t>(), v_image.data_ptr<scalar_t>(),
             v_alpha.data_ptr<scalar_t>(), pair_grads.data_ptr<scalar_t>(), v_means2d.data_ptr<scalar_t>(),
             v_conics.data_ptr<scalar_t>(), v_opacities.data_ptr<scalar_t>(), v_colors.data_ptr<scalar_t>(),
-            threads(), int(isa));
+            threads(std::min(n_tiles_of(width, height), n_isects / 16 + 1), 1), int(isa));
     });
     return {v_means2d, v_conics, v_opacities, v_colors};
 }
