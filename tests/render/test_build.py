@@ -1,0 +1,49 @@
+"""The JIT build: cache keyed by the sources, clear errors on compiler failure, CPU ISA detection."""
+
+from __future__ import annotations
+
+import pytest
+
+from eigs.errors import EigsError
+from eigs.render import _backend
+
+
+def test_build_failure_names_the_compiler_error(tmp_path, monkeypatch) -> None:
+    src = tmp_path / "csrc"
+    src.mkdir()
+    (src / "broken.cpp").write_text("int f() { return undeclared_symbol_xyz; }\n")
+    monkeypatch.setenv("EIGS_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setattr(_backend, "CSRC", src)
+    monkeypatch.setattr(_backend, "SOURCES", ("broken.cpp",))
+    monkeypatch.setattr(_backend, "HEADERS", ())
+    monkeypatch.setattr(_backend, "_module", None)
+    with pytest.raises(EigsError) as exc:
+        _backend.load()
+    msg = str(exc.value)
+    assert "building the C++ rasterizer failed" in msg
+    assert "undeclared_symbol_xyz" in msg and "error" in msg
+    assert str(src) in msg
+
+
+def test_cache_key_follows_the_sources(tmp_path, monkeypatch) -> None:
+    src = tmp_path / "csrc"
+    src.mkdir()
+    for name in _backend.SOURCES + _backend.HEADERS:
+        (src / name).write_bytes((_backend.CSRC / name).read_bytes())
+    monkeypatch.setattr(_backend, "CSRC", src)
+    before = _backend.source_hash()
+    assert before == _backend.source_hash()
+    (src / "pair_math.h").write_text((src / "pair_math.h").read_text() + "\n// edit\n")
+    assert _backend.source_hash() != before
+    monkeypatch.setenv("EIGS_CACHE_DIR", str(tmp_path / "c"))
+    assert _backend.cache_dir() == tmp_path / "c"
+
+
+def test_isa_detection() -> None:
+    isas = _backend.available_isas()
+    assert isas[0] == "baseline" and set(isas) <= {"baseline", "avx2", "avx512"}
+    with open("/proc/cpuinfo") as f:
+        flags = f.read()
+    assert ("avx2" in isas) == (" avx2" in flags and " fma" in flags)
+    with pytest.raises(ValueError, match="isa"):
+        _backend.isa_code("sse9")
