@@ -47,6 +47,7 @@ def test_synthetic_round_trip(synthetic, tmp_path, capsys):
     np.testing.assert_array_equal(s.sharp.images, want_img)
     np.testing.assert_array_equal(s.sharp.kind, [0, 1, 0, 1, 0, 1])
     np.testing.assert_array_equal(s.sharp.view, [0, -1, 1, -1, 2, -1])
+    np.testing.assert_array_equal(s.sharp.t_us, [10_000, -1, 10_000, -1, 10_000, -1])  # novel views: no view clock
     assert np.abs(s.sharp.c2w - synthetic.test_mats[:, 1] @ FLIP_YZ).max() <= 1e-12
     np.testing.assert_array_equal(s.background, [0, 0, 0])
 

@@ -52,7 +52,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--frames", metavar="FILE", help="h5: frames sidecar (default: <stem>.frames.txt beside the file)"
     )
     parser.add_argument(
-        "--camera-response", default="unknown", choices=("linear", "srgb", "unknown"), help="frame intensity response"
+        "--camera-response",
+        choices=("linear", "srgb", "unknown"),
+        help="frame intensity response (default: what the source states, else unknown)",
     )
     parser.add_argument("--contrast-threshold", type=float, help="event contrast threshold C, when known")
     parser.add_argument("--compression", default="none", choices=("none", "gzip", "lzf"), help="scene file compression")

@@ -131,16 +131,51 @@ def _frame_matrices(path: Path, frame: object, i: int, min_entries: int) -> np.n
     return m
 
 
-def _frames_by_stem(path: Path, meta: dict) -> dict[str, tuple[int, dict]]:
+def _rel_png(file_path: str) -> str:
+    """A frame's ``file_path`` as E²NeRF opens it (``basedir/file_path + '.png'``), normalised: ``train/r_0.png``."""
+    p = file_path.replace("\\", "/")
+    while p.startswith("./"):
+        p = p[2:]
+    return p if p.endswith(".png") else p + ".png"
+
+
+def _frames_by_path(path: Path, meta: dict) -> dict[str, tuple[int, dict]]:
+    """Frames of a transform JSON keyed by their normalised image path (frames without one are skipped)."""
     out: dict[str, tuple[int, dict]] = {}
     for i, fr in enumerate(meta["frames"]):
         if not isinstance(fr, dict) or not isinstance(fr.get("file_path"), str):
             raise EigsError(path, f"frame {i} has no file_path")
-        stem = Path(fr["file_path"]).stem if Path(fr["file_path"]).suffix == ".png" else Path(fr["file_path"]).name
-        if stem in out:
-            raise EigsError(path, f"frames {out[stem][0]} and {i} both name {stem}")
-        out[stem] = (i, fr)
+        if not fr["file_path"]:
+            continue  # eigs export: filler frame
+        key = _rel_png(fr["file_path"])
+        if key in out:
+            raise EigsError(path, f"frames {out[key][0]} and {i} both name {key}")
+        out[key] = (i, fr)
     return out
+
+
+def _eigs_time_base(path: Path, meta: dict, frames: list[dict], n_views: int) -> tuple[np.ndarray, ...] | None:
+    """The time base an eigs export states (``eigs`` block + ``eigs_time_us`` per frame), checked for consistency:
+    (exposure (V, 2), bin edges (V, 5), latent times (V, 5)) int64 µs; None for genuine E²NeRF data."""
+    ext = meta.get("eigs")
+    if ext is None:
+        return None
+    try:
+        exposure = np.asarray(ext["exposure_us"], dtype=np.float64)
+        edges = np.asarray(ext["bin_edges_us"], dtype=np.float64)
+        times = np.asarray([fr["eigs_time_us"] for fr in frames], dtype=np.float64)
+    except (KeyError, TypeError, ValueError):
+        raise EigsError(path, "has an 'eigs' block without exposure_us/bin_edges_us/eigs_time_us") from None
+    if exposure.shape != (n_views, 2) or edges.shape != (n_views, N_BINS + 1) or times.ndim != 2:
+        raise EigsError(path, f"'eigs' block shapes {exposure.shape}, {edges.shape} do not match {n_views} views")
+    latent = times[:, list(SYN_LATENT_ENTRIES)]
+    for name, a in (("exposure_us", exposure), ("bin_edges_us", edges), ("eigs_time_us", latent)):
+        if not np.all(np.isfinite(a)) or np.any(np.abs(a - np.rint(a)) > 1e-6):
+            raise EigsError(path, f"'eigs' {name} holds non-integer µs")
+    exposure, edges, latent = (np.rint(a).astype(np.int64) for a in (exposure, edges, latent))
+    if np.any(latent[:, 1:] != edges[:, 1:]) or np.any(edges[:, 0] > latent[:, 0]):
+        raise EigsError(path, "'eigs' bin_edges_us disagree with the latent times of entries 1, 5, 9, 13, 17")
+    return exposure, edges, latent
 
 
 def _numbered(folder: Path, pattern: str, what: str) -> dict[int, Path]:
@@ -195,22 +230,35 @@ def read_e2nerf_synthetic(folder: Path, opts: IngestOptions) -> tuple[Scene, lis
     angle = meta.get("camera_angle_x")
     if not isinstance(angle, (int, float)) or not np.isfinite(angle) or not 0 < angle < np.pi:
         raise EigsError(train_json, f"camera_angle_x must be a number in (0, π), got {angle!r}")
-    by_stem = _frames_by_stem(train_json, meta)
+    by_path = _frames_by_path(train_json, meta)
 
     imgs = _numbered(folder / "train", r"r_(\d+)\.png", "train images r_N.png")
     _check_sequence(folder / "train", list(imgs), 2, "train images")
     nums = sorted(imgs)
     n_views = len(nums)
     latent = np.empty((n_views, len(SYN_LATENT_ENTRIES), 4, 4))
+    train_frames = []
     for v, n in enumerate(nums):
-        if f"r_{n}" not in by_stem:
-            raise EigsError(train_json, f"no frame has file_path …/r_{n} (for train/r_{n}.png)")
-        i, fr = by_stem[f"r_{n}"]
+        if f"train/r_{n}.png" not in by_path:
+            raise EigsError(train_json, f"no frame has file_path ./train/r_{n} (for train/r_{n}.png)")
+        i, fr = by_path[f"train/r_{n}.png"]
         m = _frame_matrices(train_json, fr, i, max(SYN_LATENT_ENTRIES) + 1)
         latent[v] = m[list(SYN_LATENT_ENTRIES)]
+        train_frames.append(fr)
     latent = blender_to_opencv(latent)
     blurry = read_images([imgs[n] for n in nums], desc="train images")
     _, h, w, c = blurry.shape
+
+    base = _eigs_time_base(train_json, meta, train_frames, n_views)
+    if base is None:
+        exposure = np.tile(np.array(SYN_EXPOSURE_US, np.int64), (n_views, 1))
+        edges, latent_t = np.tile(SYN_BIN_EDGES_US, (n_views, 1)), np.tile(SYN_LATENT_T_US, (n_views, 1))
+        notes.append("time base: E²NeRF's (exposure [0, 170000] µs, latent poses at 10000 + 40000·k µs)")
+        ext: dict = {}
+    else:
+        exposure, edges, latent_t = base
+        notes.append("time base: the eigs export's (the 'eigs' block of transform_train.json)")
+        ext = meta["eigs"]
 
     focal = 0.5 * w / np.tan(0.5 * float(angle))
     K = np.array([[focal, 0.0, w / 2], [0.0, focal, h / 2], [0.0, 0.0, 1.0]])
@@ -253,7 +301,8 @@ def read_e2nerf_synthetic(folder: Path, opts: IngestOptions) -> tuple[Scene, lis
             c2w = blender_to_opencv(np.asarray(test_c2w))
             kind = np.asarray(test_kind, dtype=np.uint8)
             view = np.asarray(test_view, dtype=np.int64)
-            sharp = SharpImages(images, c2w, np.full(len(test_imgs), SYN_LATENT_T_US[0]), kind, view)
+            t_us = np.where(kind == SHARP_KIND_BLUR_VIEW, latent_t[np.maximum(view, 0), 0], -1).astype(np.int64)
+            sharp = SharpImages(images, c2w, t_us, kind, view)
             blur = np.flatnonzero(kind == SHARP_KIND_BLUR_VIEW)
             diff = np.abs(c2w[blur] - latent[view[blur], 0]).max(initial=0.0)
             if diff > POSE_TOL:
@@ -267,14 +316,16 @@ def read_e2nerf_synthetic(folder: Path, opts: IngestOptions) -> tuple[Scene, lis
         name=opts.name or folder.name,
         camera=Camera(K=K, width=w, height=h, distortion=dist),
         channels=c,
-        camera_response=opts.camera_response,
+        camera_response=opts.camera_response or str(ext.get("camera_response", "unknown")),
         synthetic=True,
-        background=np.zeros(c),
-        contrast_threshold=opts.contrast_threshold,
+        background=np.zeros(c) if base is None else None,  # E²NeRF: white_bkgd = False; an export does not say
+        contrast_threshold=opts.contrast_threshold
+        if opts.contrast_threshold is not None
+        else ext.get("contrast_threshold"),
         source=f"e2nerf-synthetic:{folder}",
-        frames=Frames(blurry=blurry, exposure_us=np.tile(np.array(SYN_EXPOSURE_US, np.int64), (n_views, 1))),
-        binned=BinnedEvents(counts=counts, bin_edges_us=np.tile(SYN_BIN_EDGES_US, (n_views, 1))),
-        poses=Poses(latent, np.tile(SYN_LATENT_T_US, (n_views, 1)), "ground-truth"),
+        frames=Frames(blurry=blurry, exposure_us=exposure),
+        binned=BinnedEvents(counts=counts, bin_edges_us=edges),
+        poses=Poses(latent, latent_t, "ground-truth"),
         sharp=sharp,
     )
     notes.insert(0, f"calibration: {calib}")
@@ -338,7 +389,7 @@ def read_e2nerf_real(folder: Path, opts: IngestOptions) -> tuple[Scene, list[str
         name=opts.name or folder.name,
         camera=Camera(K=K, width=w, height=h, distortion=dist),
         channels=c,
-        camera_response=opts.camera_response,
+        camera_response=opts.camera_response or "unknown",
         synthetic=False,
         contrast_threshold=opts.contrast_threshold,
         source=f"e2nerf-real:{folder}",
@@ -384,6 +435,7 @@ def ingest_e2nerf(fmt: str, source: str, out: str | Path, opts: IngestOptions) -
     if opts.views is not None:
         scene = select_views(scene, parse_views(opts.views, scene.n_views))
     write_scene(scene, out, compression=opts.compression)
-    lines = summarize(scene).splitlines()
-    gt = lines.pop()
-    return "\n".join([*lines, *(f"  {n}" if n.startswith("calibration") else f"  note: {n}" for n in notes), gt])
+    from eigs.io.summary import insert_before_groundtruth
+
+    extra = [f"  {n}" if n.startswith(("calibration", "time base")) else f"  note: {n}" for n in notes]
+    return "\n".join(insert_before_groundtruth(summarize(scene).splitlines(), extra))

@@ -36,7 +36,7 @@ class IngestOptions:
     undistort: bool = True
     time_unit: str | None = None
     frames: str | None = None
-    camera_response: str = "unknown"
+    camera_response: str | None = None
     contrast_threshold: float | None = None
     compression: str | None = None
 

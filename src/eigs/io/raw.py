@@ -202,7 +202,7 @@ def ingest_raw(src: RawSource, out: str | Path, opts: IngestOptions) -> str:
         name=opts.name or src.name,
         camera=cam,
         channels=channels,
-        camera_response=opts.camera_response,
+        camera_response=opts.camera_response or "unknown",
         synthetic=False,
         background=None,
         contrast_threshold=opts.contrast_threshold,

@@ -22,7 +22,6 @@ def ingest_summary(
     """Text for a raw-event source: ``header`` is the scene without raw events; ``stats`` None when the source
     has no events (an RGB-only recording)."""
     lines = summarize(header).splitlines()
-    gt_line = lines.pop()  # "  ground truth: ..." is last; keep it last
     extra: list[str] = []
     if stats is None:
         extra.append("  events: none in the source")
@@ -50,4 +49,10 @@ def ingest_summary(
         cal += " — distortion kept (not undistorted)"
     extra.append(cal)
     extra.extend(f"  note: {n}" for n in notes)
-    return "\n".join([*lines, *extra, gt_line])
+    return "\n".join(insert_before_groundtruth(lines, extra))
+
+
+def insert_before_groundtruth(lines: list[str], extra: list[str]) -> list[str]:
+    """Insert ``extra`` lines before the summary's "ground truth" line (or at the end)."""
+    at = next((i for i, line in enumerate(lines) if line.startswith("  ground truth:")), len(lines))
+    return [*lines[:at], *extra, *lines[at:]]
