@@ -82,6 +82,29 @@ def camera_params(K: np.ndarray, distortion: np.ndarray | None, scale: float = 1
     return "FULL_OPENCV", [fx, fy, cx, cy, *map(float, d[:4]), float(d[4]), 0.0, 0.0, 0.0]
 
 
+def pixel_scale(opts: ColmapOptions, width: int, height: int) -> float:
+    """Factor for COLMAP's pixel thresholds (tuned for full-size images): 1/f with SIFT upsampling by f, so the
+    thresholds mean the same as if COLMAP ran on the upsampled images."""
+    return 1.0 / feature_scale(width, height, opts.feature_scale)
+
+
+def verification_options(px: float):
+    import pycolmap
+
+    v = pycolmap.TwoViewGeometryOptions()
+    v.ransac.max_error = 4.0 * px
+    return v
+
+
+def apply_thresholds(o, px: float) -> None:
+    """Scale the reprojection thresholds of IncrementalPipelineOptions ``o`` by ``px``."""
+    o.mapper.init_max_error = 4.0 * px
+    o.mapper.abs_pose_max_error = 12.0 * px
+    o.mapper.filter_max_reproj_error = 4.0 * px
+    o.triangulation.merge_max_reproj_error = 4.0 * px
+    o.triangulation.complete_max_reproj_error = 4.0 * px
+
+
 def make_camera(K: np.ndarray, width: int, height: int, distortion: np.ndarray | None, camera_id: int = 1):
     import pycolmap
 
@@ -196,7 +219,9 @@ def write_position_priors(db_path: Path, positions: dict[int, np.ndarray]) -> No
         db.close()
 
 
-def match(db_path: Path, n_images: int, n_latent: int, opts: ColmapOptions, *, spatial: bool = False) -> str:
+def match(
+    db_path: Path, n_images: int, n_latent: int, opts: ColmapOptions, *, spatial: bool = False, px: float = 1.0
+) -> str:
     """Match features: exhaustive up to :data:`EXHAUSTIVE_MAX_IMAGES` images, else sequential in (view, k)
     name order; ``spatial`` adds pose-prior (spatial) matching. Returns the matcher used."""
     import pycolmap
@@ -207,20 +232,25 @@ def match(db_path: Path, n_images: int, n_latent: int, opts: ColmapOptions, *, s
     m = pycolmap.FeatureMatchingOptions()
     m.num_threads = opts.num_threads
     dev = device(opts.device)
+    ver = verification_options(px)
     if spatial:
         pairing = pycolmap.SpatialPairingOptions()
         pairing.max_num_neighbors = max(20, 4 * n_latent)
         pairing.num_threads = opts.num_threads
-        pycolmap.match_spatial(db_path, matching_options=m, pairing_options=pairing, device=dev)
+        pycolmap.match_spatial(
+            db_path, matching_options=m, pairing_options=pairing, verification_options=ver, device=dev
+        )
         return "spatial"
     if kind == "exhaustive":
-        pycolmap.match_exhaustive(db_path, matching_options=m, device=dev)
+        pycolmap.match_exhaustive(db_path, matching_options=m, verification_options=ver, device=dev)
     elif kind == "sequential":
         pairing = pycolmap.SequentialPairingOptions()
         pairing.overlap = opts.sequential_overlap or max(10, 3 * n_latent)
         pairing.quadratic_overlap = True
         pairing.num_threads = opts.num_threads
-        pycolmap.match_sequential(db_path, matching_options=m, pairing_options=pairing, device=dev)
+        pycolmap.match_sequential(
+            db_path, matching_options=m, pairing_options=pairing, verification_options=ver, device=dev
+        )
     else:
         raise EigsError(None, f"unknown matcher {opts.matcher!r} (auto, exhaustive or sequential)")
     return kind
@@ -234,7 +264,13 @@ class MappingResult:
 
 
 def map_images(
-    db_path: Path, image_dir: Path, out_dir: Path, opts: ColmapOptions, *, fixed_intrinsics: bool = True
+    db_path: Path,
+    image_dir: Path,
+    out_dir: Path,
+    opts: ColmapOptions,
+    *,
+    fixed_intrinsics: bool = True,
+    px: float = 1.0,
 ) -> MappingResult:
     """Incremental (or global) mapping; keeps the model with the most registered images."""
     import pycolmap
@@ -255,6 +291,7 @@ def map_images(
         o.ba_refine_principal_point = False
         o.multiple_models = True
         o.min_model_size = 3
+        apply_thresholds(o, px)
         recs = pycolmap.incremental_mapping(db_path, image_dir, out_dir, options=o)
     models = sorted(recs.values(), key=lambda r: r.num_reg_images(), reverse=True)
     if not models:

@@ -62,6 +62,7 @@ def triangulate(
     distortion: np.ndarray | None,
     *,
     num_threads: int = 2,
+    px: float = 1.0,
 ):
     """Triangulate the matched features with every pose fixed (``c2w``: image name → camera-to-world).
 
@@ -69,7 +70,7 @@ def triangulate(
     """
     import pycolmap
 
-    from eigs.sfm.colmap import make_camera, rigid_from_c2w
+    from eigs.sfm.colmap import apply_thresholds, make_camera, rigid_from_c2w
 
     db = pycolmap.Database.open(db_path)
     try:
@@ -85,6 +86,7 @@ def triangulate(
         rec.add_image_with_trivial_frame(img, rigid_from_c2w(c2w[name]))
     opts = pycolmap.IncrementalPipelineOptions()
     opts.num_threads = num_threads
+    apply_thresholds(opts, px)
     out_dir.mkdir(parents=True, exist_ok=True)
     return pycolmap.triangulate_points(
         rec, db_path, image_dir, out_dir, clear_points=True, options=opts, refine_intrinsics=False

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from eigs.sfm.colmap import ColmapOptions, c2w_of, device, extract
+from eigs.sfm.colmap import ColmapOptions, c2w_of, device, extract, pixel_scale, verification_options
 
 log = logging.getLogger(__name__)
 
@@ -86,11 +86,18 @@ def register_images(
     m.num_threads = opts.num_threads
     pairing = pycolmap.ImportedPairingOptions()
     pairing.match_list_path = str(pairs_file)
-    pycolmap.match_image_pairs(reg_db, matching_options=m, pairing_options=pairing, device=device(opts.device))
+    px = pixel_scale(opts, width, height)
+    pycolmap.match_image_pairs(
+        reg_db,
+        matching_options=m,
+        pairing_options=pairing,
+        verification_options=verification_options(px),
+        device=device(opts.device),
+    )
 
     camera = rec.cameras[cam_id]
     est = pycolmap.AbsolutePoseEstimationOptions()
-    est.ransac.max_error = 4.0
+    est.ransac.max_error = 4.0 * px
     est.ransac.random_seed = opts.seed
     ref = pycolmap.AbsolutePoseRefinementOptions()
     ref.refine_focal_length = False

@@ -168,8 +168,9 @@ def run_sfm(
         with timer("features"):
             name_to_id = cm.extract(db, ldir, names, cam.K, cam.width, cam.height, cam.distortion, work, opts)
         report["feature_scale"] = cm.feature_scale(cam.width, cam.height, opts.feature_scale)
+        px = cm.pixel_scale(opts, cam.width, cam.height)
         with timer("matching"):
-            report["matcher"] = cm.match(db, len(names), L, opts)
+            report["matcher"] = cm.match(db, len(names), L, opts, px=px)
 
         # -- poses in the source (model) frame -------------------------------------------------------
         raw = np.full((V, L, 4, 4), np.nan)
@@ -191,13 +192,14 @@ def run_sfm(
                     cam.height,
                     cam.distortion,
                     num_threads=opts.num_threads,
+                    px=px,
                 )
             report["models"] = [len(names)]
         else:
             with timer("mapping"):
-                res = cm.map_images(db, ldir, work / "map", opts)
+                res = cm.map_images(db, ldir, work / "map", opts, px=px)
                 if res.reconstruction is not None and report["matcher"] == "sequential":
-                    res = _spatial_pass(db, ldir, work, res, slots, names, L, opts, timer)
+                    res = _spatial_pass(db, ldir, work, res, slots, names, L, opts, px)
             report["models"] = res.model_sizes
             if res.reconstruction is None:
                 raise EigsError(
@@ -335,7 +337,7 @@ def _given_poses(scene, timestamps_us: np.ndarray, path: Path) -> np.ndarray:
     return got[0]
 
 
-def _spatial_pass(db, ldir, work, res, slots, names, L, opts, timer):
+def _spatial_pass(db, ldir, work, res, slots, names, L, opts, px):
     """Sequential matching misses pairs of views far apart in time: match spatial neighbours of the first
     model's camera centres (unregistered images take a registered sibling's centre) and map again."""
     from eigs.sfm import colmap as cm
@@ -359,8 +361,8 @@ def _spatial_pass(db, ldir, work, res, slots, names, L, opts, timer):
         if pos is not None:
             positions[ids[n]] = pos
     cm.write_position_priors(db, positions)
-    cm.match(db, len(names), L, opts, spatial=True)
-    res2 = cm.map_images(db, ldir, work / "map2", opts)
+    cm.match(db, len(names), L, opts, spatial=True, px=px)
+    res2 = cm.map_images(db, ldir, work / "map2", opts, px=px)
     if res2.reconstruction is not None and res2.model_sizes[0] >= res.model_sizes[0]:
         return res2
     return res
