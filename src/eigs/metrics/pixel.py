@@ -81,28 +81,38 @@ def _symmetric_index(n: int, pad: int) -> torch.Tensor:
 
 
 def _filter2d(x: torch.Tensor, window: torch.Tensor, padding: str) -> torch.Tensor:
-    """Separable correlation of ``x`` ``(B, H, W)`` with ``window`` ``(k,)`` along both axes.
+    """Separable correlation of ``x`` ``(B, H, W)`` with ``window`` ``(k,)`` along both axes -> ``(B, H, W)``.
 
-    ``padding="zeros"``: output ``(B, H, W)``, zero padding (3DGS). ``padding="symmetric"``: output ``(B, H, W)``,
-    symmetric padding as ``scipy.ndimage`` mode "reflect".
+    ``padding="zeros"``: zero padding (3DGS). ``padding="symmetric"``: edge-repeating reflection, as
+    ``scipy.ndimage`` mode "reflect" (scikit-image). Differentiable. float32/float16 use one depthwise conv per
+    axis (each image of the stack is a channel, channels-last: the fast CPU path); float64, which oneDNN does
+    not accelerate, sums k shifted slices per axis instead.
     """
     k = window.numel()
     pad = k // 2
-    x = x.unsqueeze(1)
-    wh = window.view(1, 1, 1, k).to(x)
-    wv = window.view(1, 1, k, 1).to(x)
+    h, w = x.shape[-2:]
     if padding == "zeros":
-        x = F.conv2d(x, wh, padding=(0, pad))
-        x = F.conv2d(x, wv, padding=(pad, 0))
+        x = F.pad(x, (pad, pad, pad, pad))
     elif padding == "symmetric":
-        h, w = x.shape[-2:]
-        x = x.index_select(3, _symmetric_index(w, pad).to(x.device))
-        x = F.conv2d(x, wh)
-        x = x.index_select(2, _symmetric_index(h, pad).to(x.device))
-        x = F.conv2d(x, wv)
+        x = x.index_select(2, _symmetric_index(w, pad).to(x.device))
+        x = x.index_select(1, _symmetric_index(h, pad).to(x.device))
     else:  # pragma: no cover - internal
         raise ValueError(padding)
-    return x.squeeze(1)
+    if x.dtype == torch.float64:
+        taps = [float(v) for v in window]
+        rows = x[:, :, 0:w] * taps[0]
+        for i in range(1, k):
+            rows = rows + x[:, :, i : i + w] * taps[i]
+        out = rows[:, 0:h, :] * taps[0]
+        for i in range(1, k):
+            out = out + rows[:, i : i + h, :] * taps[i]
+        return out
+    b = x.shape[0]
+    xc = x.unsqueeze(0).contiguous(memory_format=torch.channels_last)
+    wh = window.to(x).view(1, 1, 1, k).expand(b, 1, 1, k).contiguous()
+    wv = window.to(x).view(1, 1, k, 1).expand(b, 1, k, 1).contiguous()
+    out = F.conv2d(F.conv2d(xc, wh, groups=b), wv, groups=b)
+    return out.squeeze(0).contiguous()
 
 
 def _ssim_map(
