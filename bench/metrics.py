@@ -12,7 +12,6 @@ from collections.abc import Callable
 from pathlib import Path
 
 import cv2
-import numpy as np
 import torch
 from matplotlib import cbook
 
