@@ -73,7 +73,8 @@ def random_scene(
     axis = torch.tensor([0.3, -0.5, 0.8], dtype=torch.float64)
     axis = axis / axis.norm()
     kx = torch.tensor([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    R = torch.eye(3, dtype=torch.float64) + torch.sin(torch.tensor(ang)) * kx + (1 - torch.cos(torch.tensor(ang))) * kx @ kx
+    sin, cos = torch.sin(torch.tensor(ang)), torch.cos(torch.tensor(ang))
+    R = torch.eye(3, dtype=torch.float64) + sin * kx + (1 - cos) * kx @ kx
     t = torch.tensor([0.2, -0.1, 0.3], dtype=torch.float64)
     viewmat = torch.eye(4, dtype=torch.float64)
     viewmat[:3, :3], viewmat[:3, 3] = R, t
