@@ -55,7 +55,9 @@ def make_scene(
     blurry = frames.astype(np.float64).mean(1).round().astype(np.uint8)
     novel_c2w = rc.orbit(novel, start_deg=0.0, arc_deg=80.0, height=1.4) if novel else np.zeros((0, 4, 4))
     sharp_c2w = np.concatenate([latent[:, 0], novel_c2w])
-    sharp_img = np.concatenate([frames[:, 0], np.stack([rc.render(c, K, width, height) for c in novel_c2w])])
+    sharp_img = np.concatenate(
+        [frames[:, 0], *([np.stack([rc.render(c, K, width, height) for c in novel_c2w])] if novel else [])]
+    )
     scene = Scene(
         name="raycast",
         camera=Camera(K=K, width=width, height=height),
