@@ -166,6 +166,10 @@ def ingest_raw(src: RawSource, out: str | Path, opts: IngestOptions) -> str:
         exposure = src.frame_t_us[:, None] + np.asarray(opts.exposure_us, dtype=np.int64)[None, :]
 
     views = _views(src, opts, exposure)
+    if exposure is None and views.size:
+        src.notes.append(
+            "frame timestamps are not stored (a scene keeps exposure windows); --exposure-us START,END keeps them"
+        )
     exposure_kept = None if exposure is None else np.ascontiguousarray(exposure[views])
 
     keep_mode = opts.keep_events or ("exposures" if exposure_kept is not None else "all")
