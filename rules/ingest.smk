@@ -1,4 +1,7 @@
-# User data: E²NeRF layouts, HDF5 / text / AEDAT4 event files -> scene file.
+# User data: E²NeRF layouts, HDF5 / text / AEDAT4 event files -> scene file (docs/ingestion.md).
+# The scene is named after its config key; config `options` come after, so they may override --name.
+# Each option is shell-quoted, so paths with spaces survive.
+import shlex
 
 
 rule ingest:
@@ -10,7 +13,7 @@ rule ingest:
         scene=names_regex(INGESTED_SCENES),
     params:
         format=ingest_format,
-        options=ingest_options,
+        options=lambda wc: " ".join(shlex.quote(str(o)) for o in SCENES[wc.scene].get("options", [])),
     log:
         "logs/ingest/{scene}.log",
     benchmark:
@@ -21,7 +24,8 @@ rule ingest:
     conda:
         "../workflow/envs/eigs.yaml"
     shell:
-        "eigs ingest --format {params.format} {params.options} {input} -o {output.scene} > {log} 2>&1"
+        "eigs ingest --format {params.format} --name {wildcards.scene} {params.options} {input:q} "
+        "-o {output.scene} > {log} 2>&1"
 
 
 rule all_ingest:
