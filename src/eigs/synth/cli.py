@@ -87,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
 
     from eigs.synth.generate import generate
 
-    g = generate(args.scene, layers=layers)
+    g = generate(args.scene, layers=layers, threads=max(1, args.threads or 1))
     if args.output:
         from eigs.scene import write_scene
 

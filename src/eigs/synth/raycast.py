@@ -21,6 +21,7 @@ import numpy as np
 
 from eigs.synth.textures import load_texture
 
+ALBEDO_FLOOR = 0.03  # darkest linear albedo of a texture (before tint)
 _EPS_T = 1e-4  # minimum ray parameter accepted as a hit (scene units)
 F32 = np.float32
 
@@ -190,22 +191,36 @@ class Lighting:
     lights: tuple[tuple[tuple[float, float, float], float], ...] = (((0.4, -0.5, 1.0), 0.8), ((-0.6, 0.4, 0.3), 0.25))
 
 
-def sample_texture(tex: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Bilinear lookup with mirrored repeat. ``tex``: (S, S, 3); ``u``, ``v``: (M,) in repeats → (M, 3)."""
-    s = tex.shape[0]
+def mirror_tile(tex: np.ndarray) -> np.ndarray:
+    """(S, S, 3) texture → (2S·2S, 3) flat period of its mirrored repeat (for :func:`sample_texture`)."""
+    top = np.concatenate([tex, tex[:, ::-1]], axis=1)
+    return np.ascontiguousarray(np.concatenate([top, top[::-1]], axis=0).reshape(-1, tex.shape[2]))
 
-    def fold(c: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        m = np.mod(c * s - 0.5, 2 * s)
-        m = np.where(m >= s, 2 * s - 1 - m, m)  # mirror: texel s−1 meets texel s−1 of the reflected copy
-        m = np.clip(m, 0.0, s - 1.0)
-        i0 = m.astype(np.int64)
-        return i0, np.minimum(i0 + 1, s - 1), (m - i0).astype(F32)[:, None]
 
-    x0, x1, fx = fold(u)
-    y0, y1, fy = fold(v)
-    top = tex[y0, x0] * (1 - fx) + tex[y0, x1] * fx
-    bot = tex[y1, x0] * (1 - fx) + tex[y1, x1] * fx
-    return top * (1 - fy) + bot * fy
+def sample_texture(tile: np.ndarray, size: int, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Bilinear lookup with mirrored repeat. ``tile``: :func:`mirror_tile` of an (S, S, 3) texture, ``size`` = S;
+    ``u``, ``v``: (M,) texture coordinates in repeats (1 = one texture width) → (M, 3)."""
+    period = 2 * size
+
+    def wrap(c: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        m = np.mod(c * F32(size) - F32(0.5), F32(period))
+        i0 = m.astype(np.int32)
+        f = (m - i0).astype(F32)
+        i0 = np.minimum(i0, period - 1)  # guard m == period after float rounding
+        i1 = i0 + 1
+        i1[i1 == period] = 0
+        return i0, i1, f[:, None]
+
+    x0, x1, fx = wrap(u)
+    y0, y1, fy = wrap(v)
+    y0 *= period
+    y1 *= period
+    top = tile[y0 + x0]
+    top += (tile[y0 + x1] - top) * fx
+    bot = tile[y1 + x0]
+    bot += (tile[y1 + x1] - bot) * fx
+    top += (bot - top) * fy
+    return top
 
 
 @dataclass
@@ -218,7 +233,10 @@ class RenderResult:
 
 
 class RayCaster:
-    """Renders a list of primitives. ``background``: (3,) linear colour of rays that hit nothing."""
+    """Renders a list of primitives. ``background``: (3,) linear colour of rays that hit nothing.
+
+    A surface's linear albedo is ``tint · (albedo_floor + (1 − albedo_floor) · texture)``: real materials are
+    rarely darker than a few percent, and the floor keeps ln(Y + ε) from exploding on black texels."""
 
     def __init__(
         self,
@@ -227,6 +245,7 @@ class RayCaster:
         background: tuple[float, float, float] = (0.0, 0.0, 0.0),
         lighting: Lighting | None = None,
         texture_size: int = 128,
+        albedo_floor: float = ALBEDO_FLOOR,
     ):
         self.primitives = list(primitives)
         self.background = np.asarray(background, dtype=F32)
@@ -234,10 +253,11 @@ class RayCaster:
         self._lights = [
             (np.asarray(dvec, np.float64) / np.linalg.norm(dvec), float(gain)) for dvec, gain in self.lighting.lights
         ]
-        self._tex = [
-            (load_texture(p.material.texture, texture_size) * np.asarray(p.material.tint, F32)).astype(F32)
-            for p in self.primitives
-        ]
+        self._tex_size = int(texture_size)
+        self._tex = []
+        for p in self.primitives:
+            albedo = albedo_floor + (1 - albedo_floor) * load_texture(p.material.texture, texture_size)
+            self._tex.append(mirror_tile((albedo * np.asarray(p.material.tint, F32)).astype(F32)))
         self._rot = [np.asarray(p.rot, dtype=np.float64) for p in self.primitives]
         self._ctr = [np.asarray(p.center, dtype=np.float64) for p in self.primitives]
         self._rad = [p.bound_radius() for p in self.primitives]
@@ -299,9 +319,8 @@ class RayCaster:
             d = tuple((F32(a[i, 0]) * x + F32(a[i, 1]) * y + F32(a[i, 2])) for i in range(3))
             t = prim.intersect(o_l, d)
             bv, pv = best[r0:r1, c0:c1], pid[r0:r1, c0:c1]
-            closer = t < bv
-            bv[closer] = t[closer]
-            pv[closer] = k
+            np.copyto(pv, k, where=t < bv)
+            np.minimum(bv, t, out=bv)
         if not shade:
             return None, best
         out = np.empty((gh, gw, 3), dtype=F32)
@@ -323,7 +342,7 @@ class RayCaster:
             for ldir, gain in self._lights:
                 ll = (self._rot[k].T @ ldir).astype(F32)  # light direction in the local frame
                 shade_k += F32(gain) * np.maximum(n[0] * ll[0] + n[1] * ll[1] + n[2] * ll[2], 0.0)
-            col = sample_texture(self._tex[k], u, v) * shade_k[:, None]
+            col = sample_texture(self._tex[k], self._tex_size, u, v) * shade_k[:, None]
             out[r0:r1, c0:c1][mask] = col
         np.clip(out, 0.0, 1.0, out=out)
         return out, best
@@ -337,11 +356,13 @@ class RayCaster:
         *,
         supersample: int = 2,
         want_depth: bool = False,
+        threads: int = 1,
     ) -> RenderResult:
         """Render F views. ``c2w``: (F, 4, 4) (or (4, 4)) OpenCV camera-to-world; ``K``: (3, 3).
 
         Each pixel averages ``supersample``² stratified rays (box filter) in linear intensity. Returns (F, H, W, 3)
-        float32 images; with ``want_depth`` also the z-depth of one ray through each pixel centre.
+        float32 images; with ``want_depth`` also the z-depth of one ray through each pixel centre. ``threads`` > 1
+        renders frames in parallel threads (NumPy releases the GIL in its array loops); results are identical.
         """
         c2w = np.asarray(c2w, dtype=np.float64)
         if c2w.ndim == 2:
@@ -350,9 +371,26 @@ class RayCaster:
         s = max(int(supersample), 1)
         gx, gy = self._grid(K, width, height, s)
         rgb = np.empty((c2w.shape[0], height, width, 3), dtype=F32)
-        for f in range(c2w.shape[0]):
+        inv = F32(1.0 / (s * s))
+
+        def one(f: int) -> None:
             img, _ = self._frame(c2w[f], K, gx, gy, s)
-            rgb[f] = img.reshape(height, s, width, s, 3).mean(axis=(1, 3))
+            a = img.reshape(height, s, width, s, 3)
+            acc = a[:, 0, :, 0].copy()
+            for i in range(s):
+                for j in range(s):
+                    if i or j:
+                        acc += a[:, i, :, j]
+            rgb[f] = acc * inv
+
+        if threads > 1 and c2w.shape[0] > 1:
+            from concurrent.futures import ThreadPoolExecutor
+
+            with ThreadPoolExecutor(max_workers=threads) as pool:
+                list(pool.map(one, range(c2w.shape[0])))
+        else:
+            for f in range(c2w.shape[0]):
+                one(f)
         depth = None
         if want_depth:
             cx, cy = self._grid(K, width, height, 1)

@@ -34,7 +34,7 @@ DEFAULTS: dict[str, Any] = {
     "period_us": 200_000,  # exposure start to next exposure start
     "lead_us": 10_000,  # recording starts this long before the first exposure
     "subframes": 80,  # rendered sub-frame intervals per exposure (subframes + 1 frames)
-    "gap_subframes": 20,
+    "gap_subframes": 40,
     "lead_subframes": 2,
     "n_bins": 4,  # B: latent poses at B + 1 times per exposure
     # orbit (scene units, degrees)

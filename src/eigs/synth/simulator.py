@@ -4,7 +4,9 @@ Model (docs/synthetic.md, "Event simulator"): each pixel keeps a reference log i
 log intensity L(t) = ln(Y(t) + ε) (Y: BT.601 luma of the linear image, ε = 1e-3) is taken to vary linearly
 between consecutive frames. Every time L crosses ref + C_on the pixel emits an ON event and ref += C_on; every
 time it crosses ref − C_off it emits an OFF event and ref −= C_off. Event times are the linearly interpolated
-crossing times, rounded to integer µs. Options:
+crossing times, floored to integer µs and kept below the step's end: an event of the step from frame time t_i
+to t_{i+1} (integer µs) gets a timestamp in [t_i, t_{i+1}), within 1 µs of the exact crossing, so the events
+stamped inside an exposure [start, end) are exactly those of its sub-frame steps. Options:
 
 - per-pixel threshold mismatch: C_on, C_off ~ N(C, σ) per pixel, clamped to ≥ ``threshold_min`` (v2e);
 - refractory period: an event closer than ``refractory_us`` to the previous *emitted* event of its pixel is
@@ -112,6 +114,8 @@ class EventSimulator:
         self.t: float | None = None
         self.max_crossings_per_step = 0
         self.crossings = 0
+        # histogram of threshold crossings per active pixel per step (last bin: ≥ 64)
+        self.crossing_hist = np.zeros(65, np.int64)
 
     def _drift(self, t_us: float) -> np.ndarray | float:
         """Leak as an upward drift of L (equivalently a downward drift of ref): leak_rate·C_on·t."""
@@ -147,6 +151,7 @@ class EventSimulator:
             total = int(cnt.sum())
             self.crossings += total
             self.max_crossings_per_step = max(self.max_crossings_per_step, int(cnt.max()))
+            self.crossing_hist += np.bincount(np.minimum(cnt, 64), minlength=65)
             pix = np.repeat(flat, cnt)
             k = np.arange(total) - np.repeat(np.cumsum(cnt) - cnt, cnt) + 1  # 1..n per pixel
             pos = n_on.ravel()[pix] > 0
@@ -184,7 +189,10 @@ class EventSimulator:
         out = EventChunk.concat(chunks)
         if len(out):
             order = np.argsort(out.t, kind="stable")
-            out = EventChunk(out.x[order], out.y[order], np.rint(out.t[order]).astype(np.int64), out.p[order])
+            # ⌊crossing time⌋, kept inside [t0, t1): a step's events never share the next frame's timestamp
+            last_us = np.ceil(t1) - 1.0
+            t_int = np.minimum(np.floor(out.t[order]), last_us).astype(np.int64)
+            out = EventChunk(out.x[order], out.y[order], t_int, out.p[order])
         else:
             out.t = out.t.astype(np.int64)
         return out

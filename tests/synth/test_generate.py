@@ -1,0 +1,197 @@
+"""The generator: scene content and time base, zero shake, determinism, events vs rendered log change, blur
+extent, parameter validation, textures, contact sheet."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from eigs.errors import EigsError
+from eigs.scene import read_scene, write_scene
+from eigs.synth.generate import blur_extent, decode, encode, generate, intrinsics, write_generated
+from eigs.synth.scenes import DEFAULTS, SCENE_NAMES, get_spec, resolve_params
+from eigs.synth.simulator import log_luma
+from eigs.synth.trajectory import look_at, so3_exp
+
+# a fast variant of the toy scene: 3 + 2 views, 16 sub-frames per 16 ms exposure
+SMALL = {
+    "n_train": 3, "n_novel": 2, "subframes": 16, "exposure_us": 16_000, "period_us": 32_000, "gap_subframes": 8,
+    "lead_us": 2_000, "lead_subframes": 2, "width": 40, "height": 30,
+}
+
+
+@pytest.fixture(scope="module")
+def small():
+    return generate("toy", SMALL, show_progress=False)
+
+
+def test_scene_content_and_time_base(small):
+    s = small.scene
+    p = small.params
+    v, b = p["n_train"], p["n_bins"]
+    assert s.synthetic and s.channels == 3 and s.camera_response == "linear"
+    assert s.contrast_threshold == pytest.approx(0.2)
+    assert s.frames.blurry.shape == (v, 30, 40, 3) and s.frames.blurry.dtype == np.uint8
+    starts = p["lead_us"] + np.arange(v) * p["period_us"]
+    assert np.array_equal(s.frames.exposure_us, np.stack([starts, starts + p["exposure_us"]], 1))
+    # latent times: B + 1 evenly spaced from exposure start to end inclusive
+    k = np.arange(b + 1)
+    assert np.array_equal(s.poses.latent_t_us, starts[:, None] + k[None] * p["exposure_us"] // b)
+    assert s.poses.source == "ground-truth" and s.poses.latent_c2w.shape == (v, b + 1, 4, 4)
+    assert np.allclose(s.poses.latent_c2w.reshape(-1, 4, 4), small.path(s.poses.latent_t_us.ravel()))
+    # K: principal point at the image centre, pixel centres at j + 0.5
+    assert np.allclose(s.camera.K, intrinsics(40, 30, p["fov_deg"]))
+    assert s.camera.K[0, 2] == 20.0 and s.camera.K[1, 2] == 15.0
+    # events: sorted, cover the whole stream (also between exposures), view_index = exposure membership
+    ev = s.events
+    assert np.all(np.diff(ev.t) >= 0)
+    assert ev.t[0] < starts[0] and np.any((ev.t >= starts[0] + p["exposure_us"]) & (ev.t < starts[1]))
+    for i, (a, e) in enumerate(ev.view_index):
+        assert np.all(ev.t[a:e] >= starts[i]) and np.all(ev.t[a:e] < starts[i] + p["exposure_us"])
+    # trajectory: strictly increasing, contains every latent time, matches the path
+    tr = s.trajectory
+    assert np.all(np.diff(tr.t_us) > 0) and np.isin(s.poses.latent_t_us, tr.t_us).all()
+    assert tr.t_us[0] == 0 and tr.t_us[-1] == starts[-1] + p["exposure_us"]
+    # sharp ground truth: blur views at the first latent time, then novel views
+    sh = s.sharp
+    assert np.array_equal(sh.kind, [0, 0, 0, 1, 1]) and np.array_equal(sh.view, [0, 1, 2, -1, -1])
+    assert np.array_equal(sh.t_us[:3], s.poses.latent_t_us[:, 0])
+    assert np.allclose(sh.c2w[:3], s.poses.latent_c2w[:, 0])
+    assert np.array_equal(sh.c2w[3:], small.novel_c2w)
+    assert s.background.shape == (3,) and np.all((s.background >= 0) & (s.background <= 1))
+
+
+def test_write_and_read_back(small, tmp_path):
+    out = tmp_path / "scene.h5"
+    sheet = tmp_path / "sheet.png"
+    write_generated(small, out, contact_sheet=sheet)
+    back = read_scene(out)
+    assert np.array_equal(back.frames.blurry, small.scene.frames.blurry)
+    assert np.array_equal(back.events.t, small.scene.events.t)
+    assert back.camera_response == "linear" and back.synthetic
+    import cv2
+
+    img = cv2.imread(str(sheet))
+    assert img is not None and img.shape[0] > 100 and img.shape[1] > 3 * 128
+    # rows: blurry, sharp, events, novel → the sheet is not blank
+    assert img.std() > 10
+
+
+def test_zero_shake_gives_blurry_equal_to_sharp():
+    g = generate("toy", {**SMALL, "shake": 0.0, "shot_noise_hz": 0.0, "leak_rate_hz": 0.0}, show_progress=False)
+    s = g.scene
+    blur_gt = s.sharp.images[s.sharp.kind == 0]
+    assert np.array_equal(s.frames.blurry, blur_gt)
+    # the camera does not move during an exposure → no events inside exposures
+    assert np.all(s.events.view_index[:, 1] == s.events.view_index[:, 0])
+    assert np.all(g.blur_px < 1e-6)
+
+
+def test_deterministic_for_a_seed():
+    a = generate("toy", {**SMALL, "seed": 5}, show_progress=False).scene
+    b = generate("toy", {**SMALL, "seed": 5}, show_progress=False, threads=2).scene
+    for x, y in ((a.frames.blurry, b.frames.blurry), (a.events.t, b.events.t), (a.events.x, b.events.x),
+                 (a.events.p, b.events.p), (a.trajectory.c2w, b.trajectory.c2w), (a.sharp.images, b.sharp.images)):
+        assert np.array_equal(x, y)
+    c = generate("toy", {**SMALL, "seed": 6}, show_progress=False).scene
+    assert not np.array_equal(a.trajectory.c2w, c.trajectory.c2w)
+    assert len(a.events) != len(c.events) or not np.array_equal(a.events.t, c.events.t)
+
+
+def test_exposure_events_match_rendered_log_change():
+    """Ideal sensor, reference reset at each exposure start: |Σ signed − ΔL/C| < 1 at every pixel of every view,
+    with ΔL from re-rendering the exposure's first and last sub-frames."""
+    ideal = {"threshold_sigma": 0.0, "refractory_us": 0.0, "shot_noise_hz": 0.0, "leak_rate_hz": 0.0,
+             "reset_at_exposure": True}
+    g = generate("toy", {**SMALL, **ideal}, show_progress=False)
+    s, p = g.scene, g.params
+    w, h = s.camera.width, s.camera.height
+    for v, (a, e) in enumerate(s.events.view_index):
+        start, end = s.frames.exposure_us[v]
+        rgb = g.caster.render(g.path(np.array([start, end])), s.camera.K, w, h, supersample=p["supersample"]).rgb
+        dl = log_luma(rgb[1]) - log_luma(rgb[0])
+        net = np.zeros((h, w))
+        np.add.at(net, (s.events.y[a:e], s.events.x[a:e]), s.events.p[a:e].astype(float))
+        assert np.all(np.abs(net - dl / p["contrast_threshold"]) < 1.0), v
+        assert np.abs(dl).max() > 1.0  # the check is not vacuous
+
+
+def test_blur_extent_closed_form():
+    """Pure yaw θ about the camera centre: a point on the optical axis moves to f·tan θ from the centre."""
+    K = intrinsics(64, 48, 40.0)
+    c2w0 = np.eye(4)
+    depth = np.full((48, 64), np.inf)
+    depth[24, 32] = 3.0  # the pixel whose centre is (32.5, 24.5)
+    theta = np.deg2rad(np.array([0.0, 0.5, 1.0, 2.0]))
+    poses = np.repeat(np.eye(4)[None], theta.size, axis=0)
+    poses[:, :3, :3] = so3_exp(np.stack([np.zeros_like(theta), theta, np.zeros_like(theta)], 1))
+    ext = blur_extent(depth, K, c2w0, poses)
+    assert ext.shape == (1,)
+    # the point's projection at yaw θ: u = cx + f·tan(atan(x0/f) − θ) with x0 = 0.5 px off centre
+    f = K[0, 0]
+    u = K[0, 2] + f * np.tan(np.arctan(0.5 / f) - theta)
+    assert ext[0] == pytest.approx(u.max() - u.min(), rel=1e-6)
+
+
+def test_look_at_is_opencv():
+    m = look_at(np.array([[4.0, 0.0, 0.0]]), np.zeros(3))[0]
+    assert np.allclose(m[:3, 2], [-1, 0, 0])  # z forward, towards the target
+    assert np.allclose(m[:3, 1], [0, 0, -1])  # y down
+    assert np.allclose(np.linalg.det(m[:3, :3]), 1.0)
+
+
+@pytest.mark.parametrize(
+    "overrides, match",
+    [
+        ({"nope": 1}, "unknown parameter"),
+        ({"width": "big"}, "must be a number"),
+        ({"width": 0}, "width must be"),
+        ({"subframes": 30}, "multiple of n_bins"),
+        ({"subframes": 48}, "multiple of"),
+        ({"period_us": 50_000}, "period_us must exceed"),
+        ({"camera_response": "gamma"}, "camera_response"),
+        ({"n_train": 2.5}, "integer"),
+        ({"shake": -1}, "shake must be"),
+        ({"reset_at_exposure": 1}, "true or false"),
+    ],
+)
+def test_bad_overrides_are_clear_errors(overrides, match):
+    with pytest.raises(EigsError, match=match):
+        resolve_params("toy", ("--overrides", overrides))
+
+
+def test_unknown_scene():
+    with pytest.raises(EigsError, match="unknown built-in scene"):
+        get_spec("lego")
+
+
+def test_builtin_scene_defaults():
+    assert set(SCENE_NAMES) == {"toy", "blocks", "chair", "tree", "dish", "spheres", "drums"}
+    for name in SCENE_NAMES:
+        p = resolve_params(name)
+        want = (64, 48, 8, 4) if name == "toy" else (128, 96, 24, 12)
+        assert (p["width"], p["height"], p["n_train"], p["n_novel"]) == want
+        assert p["subframes"] >= 64
+        assert get_spec(name).build()  # geometry builds
+    assert DEFAULTS["contrast_threshold"] == 0.2 and DEFAULTS["threshold_sigma"] == 0.03
+
+
+def test_srgb_response_round_trip(tmp_path):
+    g = generate("toy", {**SMALL, "camera_response": "srgb", "n_train": 1, "n_novel": 0}, show_progress=False)
+    assert g.scene.camera_response == "srgb"
+    write_scene(g.scene, tmp_path / "s.h5")
+    x = np.linspace(0, 1, 256)
+    assert np.abs(decode(encode(x, "srgb"), "srgb") - x).max() < 0.01
+    assert np.array_equal(encode(x, "linear"), np.round(x * 255).astype(np.uint8))
+
+
+def test_textures_are_bundled_and_linear():
+    from eigs.synth.textures import TEXTURE_NAMES, linear_to_srgb, load_texture, srgb_to_linear
+
+    for name in TEXTURE_NAMES:
+        t = load_texture(name, 32)
+        assert t.shape == (32, 32, 3) and t.dtype == np.float32 and 0 <= t.min() and t.max() <= 1
+        assert t.std() > 0.01  # a photograph, not a flat colour
+    x = np.linspace(0, 1, 101)
+    assert np.allclose(linear_to_srgb(srgb_to_linear(x)), x, atol=1e-12)
+    assert srgb_to_linear(np.array([0.5]))[0] == pytest.approx(0.21404, abs=1e-4)
