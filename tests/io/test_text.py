@@ -71,6 +71,25 @@ def test_time_rounding(tmp_path):
     np.testing.assert_array_equal(read_scene(out).events.t, [2097134, 2097135, 2195720, 2195720])
 
 
+@pytest.mark.parametrize("sep,end", [("\t", "\n"), ("  ", "\n"), (" ", " \n"), (" ", "\r\n")])
+def test_separators(tmp_path, sep, end):
+    f = tmp_path / "events.txt"
+    f.write_bytes(
+        ("# c" + end + sep.join(["0.000001", "1", "2", "0"]) + end + sep.join(["0.5", "3", "4", "1"]) + end).encode()
+    )
+    out = tmp_path / "s.h5"
+    assert run_ingest("txt", f, out, "--sensor-size", f"{W}x{H}", "--intrinsics", "10,10,5,3") == 0
+    s = read_scene(out)
+    np.testing.assert_array_equal(s.events.t, [1, 500_000])
+    np.testing.assert_array_equal(s.events.x, [1, 3])
+
+
+def test_mixed_separators(tmp_path, capsys):
+    f = _events_file(tmp_path, "0.1 1 2 0\n0.2  3 4 1\n")
+    err = expect_failure(capsys, "txt", f, tmp_path / "s.h5", *OPTS)
+    assert "events.txt: line 2 separates fields differently from the first line" in err
+
+
 def test_frames_exposure_offsets_and_groundtruth(recording, tmp_path):
     from scipy.spatial.transform import Rotation
 
