@@ -226,7 +226,7 @@ SCENES: dict[str, SceneSpec] = {
     ),
     "dish": SceneSpec(
         "dish", "a plate with two buns and sausages seen from close up (≈ hotdog)", _dish, (0.04, 0.04, 0.04),
-        {"orbit_radius": 3.2, "elevation_min": 25.0, "elevation_max": 60.0, "shake_rot_deg": 0.8,
+        {"orbit_radius": 3.2, "elevation_min": 25.0, "elevation_max": 60.0, "shake_rot_deg": 0.9,
          "shake_trans": 0.015},
         target=(0.0, 0.0, -0.15),
     ),
