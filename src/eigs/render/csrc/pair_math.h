@@ -9,7 +9,6 @@
 
 #include <cmath>
 #include <cstdint>
-#include <cstring>
 
 #define EIGS_INLINE inline __attribute__((always_inline))
 
@@ -40,14 +39,9 @@ EIGS_INLINE float exp_neg(float x) {
     p = p * r + 1.6666665459e-1f;
     p = p * r + 5.0000001201e-1f;
     p = p * (r * r) + r + 1.0f;
-    int32_t ti;
-    std::memcpy(&ti, &t, sizeof(ti));
-    int32_t magic_i;
-    std::memcpy(&magic_i, &magic, sizeof(magic_i));
-    const int32_t e = (ti - magic_i + 127) << 23;
-    float scale;
-    std::memcpy(&scale, &e, sizeof(scale));
-    return p * scale;
+    // the low mantissa bits of t hold n: 2^n = bits ((n + 127) << 23)
+    const int32_t e = (__builtin_bit_cast(int32_t, t) - __builtin_bit_cast(int32_t, magic) + 127) << 23;
+    return p * __builtin_bit_cast(float, e);
 }
 
 EIGS_INLINE double exp_neg(double x) { return std::exp(x); }
@@ -66,17 +60,24 @@ EIGS_INLINE S pair_falloff(S sigma) {
     return exp_neg(-s);
 }
 
-// alpha = min(kAlphaMax, o * G) (ternary min: vectorises and keeps IEEE semantics).
+// Unclamped alpha o * G.
 template <typename S>
-EIGS_INLINE S pair_alpha(S opacity, S falloff) {
-    const S a = opacity * falloff;
-    return a < S(kAlphaMax) ? a : S(kAlphaMax);
+EIGS_INLINE S pair_raw_alpha(S opacity, S falloff) {
+    return opacity * falloff;
 }
 
-// Whether a pair takes part at all (sigma >= 0 and alpha >= kAlphaMin).
+// alpha = min(kAlphaMax, o * G) (ternary min: vectorises and keeps IEEE semantics).
 template <typename S>
-EIGS_INLINE bool pair_valid(S sigma, S alpha) {
-    return (sigma >= S(0)) & (alpha >= S(kAlphaMin));
+EIGS_INLINE S pair_alpha(S raw) {
+    return raw < S(kAlphaMax) ? raw : S(kAlphaMax);
+}
+
+// Whether a pair takes part at all: sigma >= 0 and alpha >= kAlphaMin.  Since kAlphaMax > kAlphaMin,
+// min(kAlphaMax, raw) >= kAlphaMin  <=>  raw >= kAlphaMin; testing the raw value is the same decision and lets
+// GCC vectorise the loop (a compare of the clamped value defeats its if-conversion).
+template <typename S>
+EIGS_INLINE bool pair_valid(S sigma, S raw) {
+    return (sigma >= S(0)) & (raw >= S(kAlphaMin));
 }
 
 // Whether compositing alpha onto transmittance T terminates the pixel (exclusive: the Gaussian is not added).
@@ -87,8 +88,8 @@ EIGS_INLINE bool pair_terminates(S T, S alpha) {
 
 // Whether the gradient flows through the alpha clamp (torch.clamp semantics: raw <= max passes).
 template <typename S>
-EIGS_INLINE bool pair_unclamped(S opacity, S falloff) {
-    return opacity * falloff <= S(kAlphaMax);
+EIGS_INLINE bool pair_unclamped(S raw) {
+    return raw <= S(kAlphaMax);
 }
 
 // 1 / (1 - alpha) with the backward floor.
@@ -99,7 +100,7 @@ EIGS_INLINE S pair_inv_one_minus(S alpha) {
 }
 
 // Backward of one valid pair, given v_alpha (dL/dalpha) and the falloff G:
-//   v_opacity += G v_alpha (if unclamped); v_sigma = -o G v_alpha;
+//   v_opacity += G v_alpha (if unclamped); v_sigma = -raw v_alpha with raw = o G;
 //   v_conic += v_sigma (dx^2/2, dx dy, dy^2/2); v_mean2d += v_sigma * (-(a dx + b dy), -(b dx + c dy)).
 template <typename S>
 struct PairGrad {
@@ -107,10 +108,10 @@ struct PairGrad {
 };
 
 template <typename S>
-EIGS_INLINE PairGrad<S> pair_backward(S ca, S cb, S cc, S opacity, S falloff, S dx, S dy, S v_alpha,
+EIGS_INLINE PairGrad<S> pair_backward(S ca, S cb, S cc, S raw, S falloff, S dx, S dy, S v_alpha,
                                       bool unclamped) {
     PairGrad<S> g;
-    const S v_sigma = unclamped ? -(opacity * falloff) * v_alpha : S(0);
+    const S v_sigma = unclamped ? -raw * v_alpha : S(0);
     g.v_o = unclamped ? falloff * v_alpha : S(0);
     g.v_a = S(0.5) * dx * dx * v_sigma;
     g.v_b = dx * dy * v_sigma;

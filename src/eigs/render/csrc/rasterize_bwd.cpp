@@ -114,8 +114,9 @@ EIGS_INLINE void bwd_tile(const BwdCtx<S>& A, int64_t tile, BwdScratch<S>& ws) {
                 const S dx = px[l] - mx;
                 const S sigma = pair_sigma(ca, cb, cc, dx, dy);
                 const S f = pair_falloff(sigma);
-                const S a = pair_alpha(op, f);
-                const bool v = pair_valid(sigma, a) & (kk <= Lr[l]);
+                const S raw = pair_raw_alpha(op, f);
+                const S a = pair_alpha(raw);
+                const bool v = pair_valid(sigma, raw) & (kk <= Lr[l]);
                 const S io = pair_inv_one_minus(a);
                 fall[l] = f;
                 alpha[l] = a;
@@ -150,8 +151,9 @@ EIGS_INLINE void bwd_tile(const BwdCtx<S>& A, int64_t tile, BwdScratch<S>& ws) {
                 const bool v = valid[l] != S(0);
                 const S dx = px[l] - mx;
                 const S v_alpha = dot[l] * Tk[l] - Qr[l] * inv_om[l];
-                const bool unclamped = v & pair_unclamped(op, fall[l]);
-                const PairGrad<S> pg = pair_backward(ca, cb, cc, op, fall[l], dx, dy, v_alpha, unclamped);
+                const S raw = pair_raw_alpha(op, fall[l]);
+                const bool unclamped = v & pair_unclamped(raw);
+                const PairGrad<S> pg = pair_backward(ca, cb, cc, raw, fall[l], dx, dy, v_alpha, unclamped);
                 a_mx[l] += pg.v_mx;
                 a_my[l] += pg.v_my;
                 a_a[l] += pg.v_a;

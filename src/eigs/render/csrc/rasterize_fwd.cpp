@@ -82,8 +82,9 @@ EIGS_INLINE void fwd_tile(const FwdCtx<S>& A, int64_t tile, FwdScratch<S>& ws) {
             for (int l = 0; l < kTile; ++l) {
                 const S dx = px[l] - mx;
                 const S sigma = pair_sigma(ca, cb, cc, dx, dy);
-                const S alpha = pair_alpha(op, pair_falloff(sigma));
-                const bool valid = pair_valid(sigma, alpha) & (Dr[l] == S(0));
+                const S raw = pair_raw_alpha(op, pair_falloff(sigma));
+                const S alpha = pair_alpha(raw);
+                const bool valid = pair_valid(sigma, raw) & (Dr[l] == S(0));
                 const bool term = valid & pair_terminates(Tr[l], alpha);
                 const bool contrib = valid & !term;
                 w[l] = contrib ? alpha * Tr[l] : S(0);
