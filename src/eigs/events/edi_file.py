@@ -52,6 +52,8 @@ class EdiResult:
     - ``event_count``: (V,) int64 events inside each exposure; ``events_per_pixel``: (V,) float64;
       ``blur_extent_px``: (V,) float64 estimated blur extent.
     - ``mode``: ``e2nerf`` or ``estimated``; ``threshold_scope``: ``scene``, ``view`` or ``given``.
+    - ``event_mask``: optional (H, W) bool, pixels whose events were ignored (hot pixels, flicker); their
+      ``cum_counts`` are zero, so an event loss should skip them. None when no mask was applied.
     """
 
     latent: np.ndarray
@@ -65,6 +67,7 @@ class EdiResult:
     mode: str
     threshold_scope: str
     scene_name: str = ""
+    event_mask: np.ndarray | None = None
 
     @property
     def n_views(self) -> int:
@@ -98,6 +101,11 @@ class EdiResult:
             (self.blur_extent_px.shape == (v,), "blur_extent_px must be (V,)"),
             (self.mode in MODES, f"mode must be one of {MODES}"),
             (l_ >= 2, "at least 2 latent times (1 bin) per view"),
+            (
+                self.event_mask is None
+                or (self.event_mask.dtype == np.bool_ and self.event_mask.ndim == 2),
+                "event_mask must be (H, W) bool",
+            ),
         ]
         for ok, msg in checks:
             if not ok:
@@ -136,6 +144,8 @@ def write_edi(result: EdiResult, path: str | os.PathLike) -> None:
             "blur_extent_px",
         ):
             f.create_dataset(name, data=getattr(result, name))
+        if result.event_mask is not None:
+            f.create_dataset("event_mask", data=result.event_mask)
 
 
 def read_edi(path: str | os.PathLike, *, latent: bool = True) -> EdiResult:
@@ -167,6 +177,7 @@ def read_edi(path: str | os.PathLike, *, latent: bool = True) -> EdiResult:
                 mode=str(f.attrs["mode"]),
                 threshold_scope=str(f.attrs["threshold_scope"]),
                 scene_name=str(f.attrs.get("scene", "")),
+                event_mask=f["event_mask"][()] if "event_mask" in f else None,
             )
     except (OSError, KeyError) as err:
         raise EigsError(p, f"corrupted EDI file ({err})") from None

@@ -1,0 +1,319 @@
+"""The ``edi`` stage: a scene → :class:`~eigs.events.edi_file.EdiResult` (+ latent PNGs).
+
+Steps per scene (``docs/edi.md``): choose the mode, the latent times and the bins; build the hot-pixel mask;
+per view count the events (views under :data:`SHARP_EVENTS_PER_PIXEL` are copied and marked sharp), bin them and,
+in estimated mode, build the exact exposure integral; estimate the threshold (scene or per view); compute the
+latent frames and store them in the scene's pixel domain.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from eigs.errors import EigsError
+from eigs.events import binning
+from eigs.events import mask as mask_mod
+from eigs.events import threshold as thr
+from eigs.events.edi import (
+    E2NERF_C,
+    ExposureIntegral,
+    blur_extent_px,
+    edi_continuous,
+    edi_discrete,
+    edi_e2nerf,
+    from_linear,
+    to_linear,
+)
+from eigs.events.edi_file import EdiResult, latent_png_name
+from eigs.scene.model import Scene
+from eigs.util.atomic import atomic_path
+from eigs.util.progress import progress
+
+log = logging.getLogger(__name__)
+
+SHARP_EVENTS_PER_PIXEL = 0.01  # views below this many events per pixel over the exposure are copied
+SEARCH_VIEWS = 12  # at most this many (evenly spaced) views enter the scene-scope threshold energy
+DEFAULT_BINS = 4
+FALLBACK_C = 0.2  # threshold when nothing can be estimated (no view has events)
+MODES = ("auto", "estimated", "e2nerf")
+SCOPES = ("scene", "view")
+
+
+@dataclass
+class EdiOptions:
+    mode: str = "auto"
+    bins: int | None = None  # None: 4, or the scene's bins when pre-binned
+    threshold: float | None = None  # None: estimated (estimated mode) / 0.3 (e2nerf mode)
+    threshold_scope: str = "scene"
+    mask_top: float = mask_mod.TOP_FRACTION  # 0 disables the hot-pixel mask
+    mask_factor: float = mask_mod.FACTOR
+    show_progress: bool = True
+
+
+def is_e2nerf_scene(scene: Scene) -> bool:
+    """Scenes ingested from E²NeRF layouts: the ``source`` attribute names E²NeRF, or the events come pre-binned
+    without raw timestamps (only E²NeRF's ``events.pt`` provides that)."""
+    if "e2nerf" in scene.source.lower().replace("²", "2").replace("-", "").replace("_", ""):
+        return True
+    return scene.binned is not None and scene.events is None
+
+
+def resolve_mode(scene: Scene, mode: str) -> str:
+    if mode not in MODES:
+        raise EigsError(None, f"--mode must be one of {MODES}, got {mode!r}")
+    if mode == "auto":
+        return "e2nerf" if is_e2nerf_scene(scene) else "estimated"
+    return mode
+
+
+def _view_slices(path: str, scene: Scene) -> np.ndarray:
+    """(V, 2) int64 [start, stop) offsets of each view's exposure events in ``scene.events``."""
+    ev = scene.events
+    assert ev is not None and scene.frames is not None and scene.frames.exposure_us is not None
+    if ev.view_index is not None:
+        return ev.view_index
+    exp = scene.frames.exposure_us
+    return np.stack(
+        [np.searchsorted(ev.t, exp[:, 0], side="left"), np.searchsorted(ev.t, exp[:, 1], side="left")], axis=1
+    ).astype(np.int64)
+
+
+def choose_latent_times(path: str, scene: Scene, bins: int) -> np.ndarray:
+    """(V, B + 1) int64 latent times: the scene's ``poses/latent_t_us`` when it has B + 1 per view inside the
+    exposures, else :func:`eigs.events.binning.latent_times`."""
+    assert scene.frames is not None and scene.frames.exposure_us is not None
+    exp = scene.frames.exposure_us
+    formula = binning.latent_times(exp, bins)
+    if scene.poses is not None and scene.poses.latent_t_us.shape == formula.shape:
+        lt = scene.poses.latent_t_us
+        inside = np.all((lt >= exp[:, :1]) & (lt <= exp[:, 1:]))
+        if inside and np.all(np.diff(lt, axis=1) > 0):
+            dev = int(np.abs(lt - formula).max()) if lt.size else 0
+            log.info("latent times from the scene's poses (max deviation from the midpoint formula: %d µs)", dev)
+            return lt.astype(np.int64)
+        log.warning("the scene's latent_t_us are not strictly inside the exposures; using the midpoint formula")
+    return formula
+
+
+def _estimate_threshold(evidence: list[thr.ViewEvidence]) -> float:
+    c, _ = thr.bounded_search(lambda c: sum(e.energy(c) for e in evidence))
+    return c
+
+
+def compute_edi(scene: Scene, opts: EdiOptions, path: str = "") -> EdiResult:
+    """Run EDI on every view of ``scene``. ``path`` names the scene file in error messages."""
+    path = path or scene.name
+    scene.require("frames", path=path)
+    assert scene.frames is not None
+    mode = resolve_mode(scene, opts.mode)
+    if opts.threshold_scope not in SCOPES:
+        raise EigsError(None, f"--threshold-scope must be one of {SCOPES}, got {opts.threshold_scope!r}")
+    if opts.threshold is not None and not (thr.C_MIN / 100 <= opts.threshold <= 10):
+        raise EigsError(None, f"--threshold must be a positive contrast threshold (log units), got {opts.threshold}")
+    blurry = scene.frames.blurry
+    v_n, h, w, ch = blurry.shape
+    raw = scene.events is not None and len(scene.events) > 0
+    prebinned = scene.binned is not None and not raw
+
+    # ---- bins and latent times
+    if prebinned:
+        assert scene.binned is not None
+        bins = binning.check_prebinned(path, scene.binned.n_bins, opts.bins)
+        times = scene.binned.bin_edges_us.astype(np.int64)
+    else:
+        bins = binning.check_bins(opts.bins if opts.bins is not None else DEFAULT_BINS)
+        if raw and (scene.frames.exposure_us is None):
+            raise EigsError(
+                path,
+                "the scene has raw events but no exposure times, so its events cannot be assigned to frames; "
+                "re-ingest with --exposure-us START,END (or an exposure file)",
+            )
+        if scene.frames.exposure_us is not None:
+            times = choose_latent_times(path, scene, bins)
+        else:
+            times = np.zeros((v_n, bins + 1), np.int64)
+            if scene.poses is not None and scene.poses.latent_t_us.shape == times.shape:
+                times = scene.poses.latent_t_us.astype(np.int64)
+    if not raw and not prebinned:
+        log.warning("the scene has no events: every view is passed through as sharp")
+
+    # ---- hot-pixel / flicker mask (estimated mode only: the E²NeRF mode reproduces E²NeRF exactly)
+    hot = np.zeros((h, w), dtype=bool)
+    if mode == "estimated" and opts.mask_top > 0:
+        if raw:
+            assert scene.events is not None
+            rate = mask_mod.event_rate_map(scene.events.x, scene.events.y, h, w)
+        elif prebinned:
+            assert scene.binned is not None
+            rate = np.abs(scene.binned.counts).sum(axis=(0, 1))
+        else:
+            rate = np.zeros((h, w), np.int64)
+        hot = mask_mod.hot_pixel_mask(rate, opts.mask_top, opts.mask_factor)
+        log.info("hot-pixel/flicker mask: %d pixels (%.3f %%)", int(hot.sum()), 100.0 * hot.mean())
+
+    # ---- per-view events: counts, bins, exact integrals
+    cum = np.zeros((v_n, bins + 1, h, w), np.int32)
+    event_count = np.zeros(v_n, np.int64)
+    slices = _view_slices(path, scene) if raw else None
+    integrals: list[ExposureIntegral | None] = [None] * v_n
+    evals: list[tuple[np.ndarray, np.ndarray] | None] = [None] * v_n  # (eval_counts, rate) for the energy
+    for v in progress(range(v_n), desc="edi: bin events", total=v_n, unit="view") if opts.show_progress else range(
+        v_n
+    ):
+        if raw:
+            assert scene.events is not None and slices is not None and scene.frames.exposure_us is not None
+            a, b = int(slices[v, 0]), int(slices[v, 1])
+            ev = scene.events
+            x, y, t, p = ev.x[a:b], ev.y[a:b], ev.t[a:b], ev.p[a:b]
+            event_count[v] = b - a
+            cum[v] = binning.cumulative_counts(binning.bin_events(x, y, t, p, times[v], h, w, hot))
+            if mode == "estimated" and event_count[v] >= SHARP_EVENTS_PER_PIXEL * h * w:
+                s, e = (int(u) for u in scene.frames.exposure_us[v])
+                integrals[v] = ExposureIntegral(x, y, t, p, s, e, int(times[v, 0]), h, w, hot)
+                evals[v] = _eval_maps(x, y, t, p, s, e, int(times[v, 0]), bins + 1, h, w, hot)
+        elif prebinned:
+            assert scene.binned is not None
+            counts = np.where(hot[None], 0, scene.binned.counts[v])
+            event_count[v] = int(np.abs(scene.binned.counts[v]).astype(np.int64).sum())
+            cum[v] = binning.cumulative_counts(counts)
+            evals[v] = _eval_maps_binned(counts)
+    events_per_pixel = event_count.astype(np.float64) / float(h * w)
+    sharp = events_per_pixel < SHARP_EVENTS_PER_PIXEL
+    active = np.flatnonzero(~sharp)
+    log.info("%d of %d views have events; %d are passed through as sharp", active.size, v_n, int(sharp.sum()))
+
+    # ---- threshold
+    thresholds = np.full(v_n, np.nan)
+    lin = [None] * v_n
+    if mode == "e2nerf":
+        thresholds[:] = E2NERF_C if opts.threshold is None else opts.threshold
+        scope = "given"
+    else:
+        for v in active:
+            lin[v] = to_linear(blurry[v], scene.camera_response)
+        evidence = {
+            int(v): thr.ViewEvidence(lin[v], integrals[v], cum[v], *evals[v]) for v in active if evals[v] is not None
+        }
+        if opts.threshold is not None:
+            thresholds[:] = opts.threshold
+            scope = "given"
+        elif not evidence:
+            thresholds[:] = scene.contrast_threshold or FALLBACK_C
+            scope = opts.threshold_scope
+            log.warning("no view has events: threshold set to %.3f without estimation", thresholds[0])
+        elif opts.threshold_scope == "scene":
+            keys = sorted(evidence)
+            idx = np.unique(np.linspace(0, len(keys) - 1, min(SEARCH_VIEWS, len(keys))).round().astype(int))
+            pick = [keys[i] for i in idx]
+            c = _estimate_threshold([evidence[k] for k in pick])
+            log.info("estimated contrast threshold (scene, %d views): c = %.4f", len(pick), c)
+            thresholds[:] = c
+            scope = "scene"
+        else:
+            it = progress(sorted(evidence), desc="edi: threshold", unit="view") if opts.show_progress else evidence
+            for v in it:
+                thresholds[v] = _estimate_threshold([evidence[v]])
+            fill = float(np.median(thresholds[sorted(evidence)]))
+            thresholds[np.isnan(thresholds)] = fill
+            scope = "view"
+            log.info("estimated thresholds per view: median %.4f, range %.4f–%.4f", fill, *np.nanpercentile(
+                thresholds, [0, 100]))
+
+    # ---- latent frames
+    latent = np.empty((v_n, bins + 1, h, w, ch), np.float32)
+    extent = np.zeros(v_n, np.float64)
+    it2 = progress(range(v_n), desc="edi: latent frames", total=v_n, unit="view") if opts.show_progress else range(
+        v_n
+    )
+    for v in it2:
+        if sharp[v]:
+            latent[v] = (blurry[v].astype(np.float32) / 255.0)[None]
+            continue
+        c = float(thresholds[v])
+        if mode == "e2nerf":
+            lat = edi_e2nerf(blurry[v], cum[v], c)
+            latent[v] = (np.clip(lat, 0.0, 255.0) / 255.0).astype(np.float32)
+        else:
+            if integrals[v] is not None:
+                lat = edi_continuous(lin[v], cum[v], integrals[v].log_mean_exp(c), c)
+            else:
+                lat = edi_discrete(lin[v], cum[v], c)
+            latent[v] = from_linear(np.clip(lat, 0.0, 1.0), scene.camera_response).astype(np.float32)
+        extent[v] = blur_extent_px(latent[v])
+    return EdiResult(
+        latent=latent,
+        timestamps_us=times.astype(np.int64),
+        cum_counts=cum,
+        threshold=thresholds.astype(np.float64),
+        sharp=sharp,
+        event_count=event_count,
+        events_per_pixel=events_per_pixel,
+        blur_extent_px=extent,
+        mode=mode,
+        threshold_scope=scope,
+        scene_name=scene.name,
+        event_mask=hot,
+    )
+
+
+def _eval_maps(
+    x: np.ndarray,
+    y: np.ndarray,
+    t: np.ndarray,
+    p: np.ndarray,
+    start: int,
+    end: int,
+    t_ref: int,
+    n: int,
+    h: int,
+    w: int,
+    hot: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Energy evaluation times τ_j at the midpoints of ``n`` equal slices of the exposure (so every window lies
+    inside it): returns ((n, H, W) event integral from ``t_ref`` to τ_j, (n, H, W) signed events in slice j)."""
+    edges = start + (np.arange(n + 1, dtype=np.int64) * (end - start)) // n
+    if np.any(np.diff(edges) <= 0):  # exposure shorter than n µs
+        edges = np.arange(n + 1, dtype=np.int64) + start
+    mids = (edges[:-1] + edges[1:]) // 2
+    rate = binning.bin_events(x, y, t, p, edges, h, w, hot).astype(np.float64)
+    cut = np.unique(np.concatenate([[t_ref], mids]))
+    if cut.shape[0] > 1:
+        cum = binning.cumulative_counts(binning.bin_events(x, y, t, p, cut, h, w, hot))
+        pos = np.searchsorted(cut, mids)
+        counts = cum[pos].astype(np.float64)
+    else:
+        counts = np.zeros((n, h, w))
+    return counts, rate
+
+
+def _eval_maps_binned(counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Binned analogue of :func:`_eval_maps`: the interior latent times k = 1..B−1 (all B + 1 when B = 1), with
+    the sum of the two bins around each as its event map."""
+    c = counts.astype(np.float64)
+    cum = binning.cumulative_counts(counts).astype(np.float64)
+    nb = c.shape[0]
+    if nb == 1:
+        return cum, np.concatenate([c, c])
+    return cum[1:nb], c[:-1] + c[1:]
+
+
+def write_latent_pngs(result: EdiResult, directory: str | os.PathLike) -> int:
+    """Write every latent frame as an 8-bit PNG ``latent_png_name(v, k)`` into ``directory`` (atomically, replacing
+    it). Returns the number of files."""
+    import cv2
+
+    n = 0
+    with atomic_path(directory, directory=True) as tmp:
+        for v in range(result.n_views):
+            for k in range(result.n_bins + 1):
+                img = np.rint(np.clip(result.latent[v, k], 0.0, 1.0) * 255.0).astype(np.uint8)
+                img = img[..., 0] if img.shape[-1] == 1 else cv2.cvtColor(img, cv2.COLOR_RGB2BGR)
+                if not cv2.imwrite(str(Path(tmp) / latent_png_name(v, k)), img):
+                    raise EigsError(directory, f"could not write {latent_png_name(v, k)}")
+                n += 1
+    return n
