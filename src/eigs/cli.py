@@ -22,6 +22,7 @@ COMMANDS: dict[str, str] = {
     "scene": "eigs.scene.cli",
     "synth": "eigs.synth.cli",
     "ingest": "eigs.io.cli",
+    "edi": "eigs.events.cli",
     "sfm": "eigs.sfm.cli",
     "init": "eigs.sfm.init_cli",
     "metric": "eigs.metrics.cli",
