@@ -81,3 +81,23 @@ def init_options(wildcards):
         f"--min-points {int(s.get('min_points', 1000))} --random {int(s.get('random', 10000))} "
         f"--sh-degree {int(s.get('sh_degree', 3))}"
     )
+
+
+# --- edi (rules/edi.smk) --------------------------------------------------------------------------------------
+def edi_bins():
+    """The configured bin counts (config `edi: bins:`, default [4])."""
+    return [int(b) for b in config.get("edi", {}).get("bins", [4])]
+
+
+def edi_options(wildcards):
+    """`eigs edi` flags from the `edi:` config section (the bins come from the {bins} wildcard)."""
+    e = config.get("edi", {})
+    opts = [
+        f"--mode {e.get('mode', 'auto')}",
+        f"--threshold-scope {e.get('threshold_scope', 'scene')}",
+        f"--mask-top {float(e.get('mask_top', 0.01))}",
+        f"--mask-factor {float(e.get('mask_factor', 8.0))}",
+    ]
+    if e.get("threshold") is not None:
+        opts.append(f"--threshold {float(e['threshold'])}")
+    return " ".join(opts)

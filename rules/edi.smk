@@ -1,0 +1,34 @@
+# EDI latent sharp frames: binning, E²NeRF or estimated mode, latent PNGs for SfM (keyed by the number of bins).
+
+
+rule edi:
+    input:
+        "results/{scene}/scene.h5",
+    output:
+        edi="results/{scene}/b{bins}/edi.h5",
+        latent=directory("results/{scene}/b{bins}/latent"),
+    wildcard_constraints:
+        scene=names_regex(sorted(SCENES)),
+        bins=r"\d+",
+    params:
+        options=edi_options,
+    log:
+        "logs/edi/{scene}_b{bins}.log",
+    benchmark:
+        "benchmarks/edi/{scene}_b{bins}.tsv"
+    threads: threads_for("edi")
+    resources:
+        mem_mb=4000,
+    conda:
+        "../workflow/envs/eigs.yaml"
+    shell:
+        "eigs edi {input} -o {output.edi} --latent-dir {output.latent} --bins {wildcards.bins} "
+        "{params.options} --threads {threads} > {log} 2>&1"
+
+
+rule all_edi:
+    input:
+        expand("results/{scene}/b{bins}/edi.h5", scene=sorted(SCENES), bins=edi_bins()),
+
+
+STAGE_TARGETS.extend(rules.all_edi.input)
