@@ -102,10 +102,10 @@ def _filter2d(x: torch.Tensor, window: torch.Tensor, padding: str) -> torch.Tens
         taps = [float(v) for v in window]
         rows = x[:, :, 0:w] * taps[0]
         for i in range(1, k):
-            rows = rows + x[:, :, i : i + w] * taps[i]
+            rows.add_(x[:, :, i : i + w], alpha=taps[i])  # in place: no temporaries; autograd-safe (add)
         out = rows[:, 0:h, :] * taps[0]
         for i in range(1, k):
-            out = out + rows[:, i : i + h, :] * taps[i]
+            out.add_(rows[:, i : i + h, :], alpha=taps[i])
         return out
     b = x.shape[0]
     xc = x.unsqueeze(0).contiguous(memory_format=torch.channels_last)
