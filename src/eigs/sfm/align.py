@@ -107,29 +107,61 @@ def rotation_from_orientations(src_R: np.ndarray, dst_R: np.ndarray) -> np.ndarr
     return project_to_rotation(m)
 
 
+def _rotation_about(axis: np.ndarray, angle: float) -> np.ndarray:
+    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + np.sin(angle) * k + (1.0 - np.cos(angle)) * k @ k
+
+
+def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Smallest rotation taking unit vector ``a`` to unit vector ``b``."""
+    v = np.cross(a, b)
+    s, c = float(np.linalg.norm(v)), float(np.dot(a, b))
+    if s < 1e-15:
+        if c > 0:
+            return np.eye(3)
+        perp = np.cross(a, [1.0, 0, 0] if abs(a[0]) < 0.9 else [0, 1.0, 0])  # 180° about any perpendicular
+        return _rotation_about(perp / np.linalg.norm(perp), np.pi)
+    return _rotation_about(v / s, np.arctan2(s, c))
+
+
+def _principal_direction(x: np.ndarray) -> np.ndarray:
+    return np.linalg.svd(x - x.mean(0), full_matrices=False)[2][0]
+
+
 def align_trajectory(src_c2w: np.ndarray, dst_c2w: np.ndarray, *, with_scale: bool = True) -> tuple[Sim3, str]:
     """Sim(3) mapping the ``src`` camera centres onto ``dst`` (both (N, 4, 4) c2w).
 
-    Returns ``(sim, method)``: ``"umeyama"`` on the centres; for a collinear ``dst`` trajectory
-    ``"orientation"``, the rotation from the camera orientations and scale/translation from the centres in
-    closed form given that rotation. With fewer than 2 distinct centres only the rotation and translation are
-    fitted (scale 1): ``"orientation-only"``.
+    Returns ``(sim, method)``: ``"umeyama"`` on the centres in general. For a collinear ``dst`` trajectory (a
+    slider) the centres fix only the direction of the line, not the rotation about it: ``"line+orientation"``
+    maps the ``src`` line direction onto the ``dst`` one and takes the remaining rotation about the line from the
+    camera orientations (closed form), then scale and translation from the centres. The centre residuals (ATE)
+    are then those of a centres-only fit, and the rotation errors are meaningful. With fewer than 2 distinct
+    ``src`` or ``dst`` centres the whole rotation comes from the orientations and the scale is 1:
+    ``"orientation-only"``.
     """
     src_c2w = np.asarray(src_c2w, np.float64)
     dst_c2w = np.asarray(dst_c2w, np.float64)
     cs, cd = src_c2w[:, :3, 3], dst_c2w[:, :3, 3]
     if not is_collinear(cd):
         return umeyama(cs, cd, with_scale=with_scale), "umeyama"
-    R = rotation_from_orientations(src_c2w[:, :3, :3], dst_c2w[:, :3, :3])
     mu_s, mu_d = cs.mean(0), cd.mean(0)
     xs, xd = cs - mu_s, cd - mu_d
-    den = float((xs**2).sum())
-    if den <= 1e-18 * max(1.0, float((cs**2).sum())):
+    tiny = 1e-12 * max(1.0, float(np.abs(cs).max()), float(np.abs(cd).max()))
+    if np.linalg.norm(xs, axis=1).max() <= tiny or np.linalg.norm(xd, axis=1).max() <= tiny:
+        R = rotation_from_orientations(src_c2w[:, :3, :3], dst_c2w[:, :3, :3])
         return Sim3(1.0, R, mu_d - R @ mu_s), "orientation-only"
-    scale = float(np.einsum("ni,ni->", xd, xs @ R.T) / den) if with_scale else 1.0
-    if scale <= 0:  # the orientations disagree with the direction of travel; fall back to the centres alone
-        return umeyama(cs, cd, with_scale=with_scale), "umeyama"
-    return Sim3(scale, R, mu_d - scale * R @ mu_s), "orientation"
+    de, dg = _principal_direction(cs), _principal_direction(cd)
+    if np.dot(xs @ de, xd @ dg) < 0:  # orient the src direction like the travel along dst
+        de = -de
+    R0 = _rotation_between(de, dg)
+    # rotation about dg maximising Σ tr(R_dst_iᵀ · Rot(dg, φ) · R0 · R_src_i) = tr(Rot(dg, φ) · A)
+    A = R0 @ np.einsum("nij,nkj->ik", src_c2w[:, :3, :3], dst_c2w[:, :3, :3])
+    a = float(np.trace(A) - dg @ A @ dg)
+    kx = np.array([[0, -dg[2], dg[1]], [dg[2], 0, -dg[0]], [-dg[1], dg[0], 0]])
+    b = float(np.trace(kx @ A))
+    R = _rotation_about(dg, np.arctan2(b, a)) @ R0
+    scale = float(np.einsum("ni,ni->", xd, xs @ R.T) / float((xs**2).sum())) if with_scale else 1.0
+    return Sim3(scale, R, mu_d - scale * R @ mu_s), "line+orientation"
 
 
 def rotation_angle_deg(Ra: np.ndarray, Rb: np.ndarray) -> np.ndarray:

@@ -19,13 +19,14 @@ log = logging.getLogger(__name__)
 
 
 def latent_poses_at(
-    scene, timestamps_us: np.ndarray, *, ground_truth_only: bool = True
+    scene, timestamps_us: np.ndarray, *, ground_truth_only: bool = True, clamp: bool = False
 ) -> tuple[np.ndarray, str] | None:
     """Scene poses at the latent times ``timestamps_us`` (V, L): ``(c2w (V, L, 4, 4), source)`` or None.
 
     Sources in order: the scene's latent poses (``ground-truth`` source, or any source when
     ``ground_truth_only`` is False), exact when their times equal ``timestamps_us`` and interpolated within
-    each view otherwise; then the dense ground-truth trajectory. ``source`` names what was used.
+    each view otherwise; then the dense ground-truth trajectory. ``source`` names what was used. Latent times
+    outside the trajectory get its end poses with ``clamp``, else NaN (no ground truth there).
     """
     ts = np.asarray(timestamps_us, np.int64)
     p = scene.poses
@@ -44,8 +45,11 @@ def latent_poses_at(
         lo, hi = int(tr.t_us[0]), int(tr.t_us[-1])
         outside = int(np.count_nonzero((ts < lo) | (ts > hi)))
         if outside:
-            log.warning("%d latent times lie outside the ground-truth trajectory: its end poses are used", outside)
+            what = "its end poses are used" if clamp else "they have no ground truth"
+            log.warning("%d latent times lie outside the ground-truth trajectory: %s", outside, what)
         out = interpolate_c2w(tr.t_us, tr.c2w, ts.ravel()).reshape(*ts.shape, 4, 4)
+        if not clamp:
+            out[(ts < lo) | (ts > hi)] = np.nan
         return out, "ground-truth trajectory, interpolated to the latent times"
     return None
 

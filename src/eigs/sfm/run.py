@@ -275,7 +275,10 @@ def run_sfm(
         gt = latent_poses_at(scene, edi.timestamps_us)
         est_to_gt = None
         if gt is not None:
-            est_to_gt, report["accuracy"] = _accuracy(c2w, registered, gt[0], edi.sharp)
+            estimated = registered.copy()
+            estimated[np.asarray(edi.sharp, bool), 1:] = False  # copied slots of sharp views are no estimates
+            estimated &= np.all(np.isfinite(gt[0]), axis=(-2, -1))  # latents with ground truth
+            est_to_gt, report["accuracy"] = _accuracy(c2w, estimated, gt[0], edi.sharp)
             report["accuracy"]["ground_truth"] = gt[1]
             a = report["accuracy"]
             log.info(
@@ -330,7 +333,7 @@ def run_sfm(
 def _given_poses(scene, timestamps_us: np.ndarray, path: Path) -> np.ndarray:
     from eigs.sfm.given import latent_poses_at
 
-    got = latent_poses_at(scene, timestamps_us, ground_truth_only=False)
+    got = latent_poses_at(scene, timestamps_us, ground_truth_only=False, clamp=True)
     if got is None:
         raise EigsError(path, "--mode given: the scene has no poses for these views (use --mode colmap)")
     log.info("given poses: %s", got[1])
@@ -372,10 +375,15 @@ def _accuracy(c2w, registered, gt, sharp) -> tuple:
     """Sim(3) of registered latents onto ground truth, ATE, rotation errors, relative latent errors."""
     from eigs.sfm.align import extent, latent_relative_errors, motion_ratio_per_view, trajectory_accuracy
 
-    ext = extent(gt.reshape(-1, 4, 4)[:, :3, 3])
+    g = gt.reshape(-1, 4, 4)
+    ext = extent(g[np.all(np.isfinite(g), axis=(1, 2))][:, :3, 3])
     acc = trajectory_accuracy(c2w[registered], gt[registered], gt_extent=ext)
     out = acc.summary()
-    rel = latent_relative_errors(c2w, gt, acc.sim.scale, valid=registered)
+
+    def eye_if_nan(a):
+        return np.where(np.all(np.isfinite(a), axis=(-2, -1))[..., None, None], a, np.eye(4))
+
+    rel = latent_relative_errors(eye_if_nan(c2w), eye_if_nan(gt), acc.sim.scale, valid=registered)
     moving = ~np.asarray(sharp, bool)
     tr = motion_ratio_per_view(rel["t_err"][moving], rel["t_motion"][moving], 1e-6 * max(ext, 1e-12))
     rr = motion_ratio_per_view(rel["r_err_deg"][moving], rel["r_motion_deg"][moving], 1e-4)
