@@ -49,11 +49,6 @@ def ingest_options(wildcards):
 ALL_SCENES = sorted(SCENES)
 
 
-def sfm_bins():
-    """The EDI bin counts (config `edi: bins:`), shared by every stage keyed by b{bins}."""
-    return [int(b) for b in config.get("edi", {}).get("bins", [4])]
-
-
 def sfm_options(wildcards):
     """`eigs sfm` flags from the `sfm:` config section."""
     s = config.get("sfm", {})

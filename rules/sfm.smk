@@ -52,8 +52,8 @@ rule init:
 
 rule all_sfm:
     input:
-        expand("results/{scene}/b{bins}/sfm", scene=ALL_SCENES, bins=sfm_bins()),
-        expand("results/{scene}/b{bins}/init.ply", scene=ALL_SCENES, bins=sfm_bins()),
+        expand("results/{scene}/b{bins}/sfm", scene=ALL_SCENES, bins=edi_bins()),
+        expand("results/{scene}/b{bins}/init.ply", scene=ALL_SCENES, bins=edi_bins()),
 
 
 STAGE_TARGETS.extend(rules.all_sfm.input)
