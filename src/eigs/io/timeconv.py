@@ -116,4 +116,4 @@ def to_pixel(a: np.ndarray, size: int, axis: str, where: str, offset: int = 0) -
             where,
             f"{axis} of event {offset + bad} is {a[bad]}, outside the sensor (0 ≤ {axis} < {size})",
         )
-    return a.astype(np.uint16)
+    return a.astype(np.uint16, copy=False)
