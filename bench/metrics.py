@@ -26,14 +26,14 @@ from eigs.metrics.pixel import psnr, ssim, ssim_torch  # noqa: E402
 THREADS = 2
 
 
-def timed(fn: Callable[[], object], repeats: int) -> float:
-    """Median wall time in ms of ``fn`` after one warm-up call."""
+def timed(fn: Callable[[], object], repeats: int, clock: Callable[[], float] = time.perf_counter) -> float:
+    """Median time in ms of ``fn`` on ``clock`` after one warm-up call."""
     fn()
     times = []
     for _ in range(repeats):
-        t = time.perf_counter()
+        t = clock()
         fn()
-        times.append((time.perf_counter() - t) * 1e3)
+        times.append((clock() - t) * 1e3)
     return statistics.median(times)
 
 
@@ -63,15 +63,27 @@ def main() -> None:
         ("lpips vgg", "float32, no_grad", lambda: lpips(blurred, sharp, "vgg"), 3),
         ("brisque", "one image (no reference)", lambda: brisque(blurred), 10),
     ]
+    load_before = Path("/proc/loadavg").read_text().split()[0]
     rows = []
     for name, how, fn, repeats in cases:
-        ms = timed(fn, repeats)
-        rows.append([name, how, ms])
-        print(f"{name:24s} {how:48s} {ms:9.2f} ms", flush=True)
+        torch.set_num_threads(THREADS)
+        cv2.setNumThreads(THREADS)
+        wall = timed(fn, repeats)
+        torch.set_num_threads(1)
+        cv2.setNumThreads(1)
+        cpu = timed(fn, repeats, time.process_time)
+        rows.append([name, how, wall, cpu])
+        print(f"{name:24s} {how:48s} {wall:9.2f} ms wall (2 thr) {cpu:9.2f} ms CPU (1 thr)", flush=True)
+    load_after = Path("/proc/loadavg").read_text().split()[0]
+    headers = ["metric", "how", f"wall ms, {THREADS} threads", "CPU ms, 1 thread"]
     body = (
-        f"Median wall time per 512x512 RGB pair (matplotlib's `grace_hopper.jpg` cropped, against its σ = 2 blur), "
-        f"{THREADS} torch/OpenCV threads, after one warm-up call.\n\n" + table(["metric", "how", "ms per pair"], rows)
+        "Median time per 512x512 RGB pair (matplotlib's `grace_hopper.jpg` cropped, against its σ = 2 blur) after "
+        f"one warm-up call: wall time with {THREADS} torch/OpenCV threads, and process CPU time with 1 thread "
+        "(robust to other jobs on a shared machine; about the wall time on an idle core). 1-minute load average "
+        f"{load_before} before and {load_after} after: a load above the core count inflates wall times, torch's "
+        "multi-threaded element-wise ops most.\n\n" + table(headers, rows)
     )
+    torch.set_num_threads(THREADS)  # the section's stamp reports torch's thread count
     write_section("metrics", "Image-quality metrics", body)
 
 
