@@ -137,3 +137,19 @@ def test_needs_intrinsics(tmp_path, capsys):
     _recording(src)
     err = expect_failure(capsys, "aedat4", src, tmp_path / "s.h5")
     assert "rec.aedat4: the source has no camera calibration; give --intrinsics" in err
+
+
+def test_known_point_projection(tmp_path):
+    """--intrinsics is OpenCV's convention: our K projects a point to OpenCV's pixel + 0.5."""
+    import cv2
+
+    src = tmp_path / "rec.aedat4"
+    _recording(src)
+    out = tmp_path / "s.h5"
+    assert run_ingest("aedat4", src, out, "--intrinsics", "30.5,29,5.25,3.5") == 0
+    K = read_scene(out).camera.K
+    P = np.array([[0.05, -0.04, 1.2]])
+    Kcv = np.array([[30.5, 0, 5.25], [0, 29, 3.5], [0, 0, 1.0]])
+    uv = cv2.projectPoints(P, np.zeros(3), np.zeros(3), Kcv, np.zeros(5))[0].reshape(2)
+    uvw = K @ P[0]
+    np.testing.assert_allclose(uvw[:2] / uvw[2], uv + 0.5, atol=1e-12)
