@@ -193,9 +193,9 @@ i.e. ns per pair-lane per core including any contention):
 {table(["image", "N", "fwd ms", "bwd ms", "M pair-lanes", "fwd ns", "bwd ns", "fwd+bwd ns/core",
         "fwd+bwd ns/core (2T)", "CPU 2T/1T"], kernel_rows)}
 
-"CPU 2T/1T" is the kernels' total CPU time on 2 threads over that on 1 thread: the extra work (scheduling, spinning,
-memory traffic) that parallelism adds. It does not depend on whether the second core is free; with a free core the
-scaling would be about 2 / (CPU 2T/1T) if the tiles balance (an estimate, not a measurement).
+"CPU 2T/1T" is the kernels' total CPU time on 2 threads over that on 1 thread: the extra work (scheduling,
+OpenMP spin-waiting, memory traffic) that parallelism adds. Waiting threads spin, so on a contended machine this
+ratio is inflated too; near 1 it means the parallel version does no extra work.
 
 **ISA variants** (256² with 64k Gaussians, kernels only, 1 thread, CPU ns per pair-lane; "baseline" is the
 SSE2 fallback, in which GCC leaves the forward lane loop scalar):
