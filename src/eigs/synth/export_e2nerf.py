@@ -166,6 +166,7 @@ def write_e2nerf_synthetic(
         "height": cam.height,
         "scene": scene.name,
         "contrast_threshold": scene.contrast_threshold,
+        "background": None if scene.background is None else np.asarray(scene.background).tolist(),
     }
 
     def frame(path: str, m: np.ndarray, t: np.ndarray, kind: str, view: int) -> dict[str, Any]:
