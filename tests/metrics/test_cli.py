@@ -85,11 +85,15 @@ def test_user_errors_exit_2(images, capsys):
 
 
 def test_lpips_and_brisque_commands(resources_dir, tid2013, capsys, tmp_path):
-    argv = ["metric", "lpips", str(tid2013 / "dist_dir"), str(tid2013 / "ref_dir"), "--resources", str(resources_dir)]
+    for sub in ("dist_dir", "ref_dir"):  # two of the five pairs keep this test fast
+        for name in ("I06", "I08"):
+            (tmp_path / sub).mkdir(exist_ok=True)
+            (tmp_path / sub / f"{name}.bmp").symlink_to(tid2013 / sub / f"{name}.bmp")
+    argv = ["metric", "lpips", str(tmp_path / "dist_dir"), str(tmp_path / "ref_dir"), "--resources", str(resources_dir)]
     assert main(argv) == 0
     mean, lines = _last(capsys)
-    assert lines[0] == "image,lpips_alex" and len(lines) == 7
-    assert mean == pytest.approx(np.mean([0.7237, 0.2572, 0.05079, 0.05205, 0.4253]), abs=1e-3)
+    assert lines[0] == "image,lpips_alex" and len(lines) == 4
+    assert mean == pytest.approx((0.05079 + 0.05205) / 2, abs=1e-3)
     assert main(["metric", "brisque", str(tid2013 / "dist_dir/I04.bmp"), "--resources", str(resources_dir)]) == 0
     assert _last(capsys)[0] == pytest.approx(0.32, abs=0.01)
     const = _write(tmp_path / "const.png", np.full((50, 50), 9, np.uint8))
