@@ -17,6 +17,10 @@ from eigs.sfm.poses import interpolate_c2w
 
 log = logging.getLogger(__name__)
 
+GUIDED_NEIGHBOURS = 24  # images of other views matched per image in given mode
+GUIDED_RATIO = 0.8  # Lowe ratio among the candidates inside the epipolar band
+GUIDED_MIN_MATCHES = 8
+
 
 def latent_poses_at(
     scene, timestamps_us: np.ndarray, *, ground_truth_only: bool = True, clamp: bool = False
@@ -95,3 +99,124 @@ def triangulate(
     return pycolmap.triangulate_points(
         rec, db_path, image_dir, out_dir, clear_points=True, options=opts, refine_intrinsics=False
     )
+
+
+def _skew(t: np.ndarray) -> np.ndarray:
+    return np.array([[0, -t[2], t[1]], [t[2], 0, -t[0]], [-t[1], t[0], 0]])
+
+
+def _pair_candidates(c2w: dict[int, np.ndarray], view_of: dict[int, int], neighbours: int) -> set[tuple[int, int]]:
+    """Image pairs to match: every pair inside a view, plus each image's ``neighbours`` closest images of other
+    views (centre distance in units of the median spread plus 1 − cos of the viewing-direction angle, front-facing
+    only)."""
+    ids = sorted(c2w)
+    cs = np.stack([c2w[i][:3, 3] for i in ids])
+    zs = np.stack([c2w[i][:3, 2] for i in ids])
+    spread = float(np.median(np.linalg.norm(cs - cs.mean(0), axis=1))) or 1.0
+    pairs: set[tuple[int, int]] = set()
+    for a, ia in enumerate(ids):
+        score = np.linalg.norm(cs - cs[a], axis=1) / spread + (1.0 - zs @ zs[a])
+        other = [b for b in np.argsort(score) if view_of[ids[b]] != view_of[ia] and zs[b] @ zs[a] > 0.0]
+        for b in other[:neighbours]:
+            pairs.add((min(ia, ids[b]), max(ia, ids[b])))
+        for b, ib in enumerate(ids):
+            if b != a and view_of[ib] == view_of[ia]:
+                pairs.add((min(ia, ib), max(ia, ib)))
+    return pairs
+
+
+def guided_match(
+    db_path: Path,
+    c2w: dict[int, np.ndarray],
+    view_of: dict[int, int],
+    *,
+    max_epipolar_px: float = 4.0,
+    neighbours: int = GUIDED_NEIGHBOURS,
+) -> dict[str, int]:
+    """Match features with the known poses: for each candidate pair, mutual nearest SIFT descriptors among the
+    keypoints within ``max_epipolar_px`` (original pixels) of the epipolar line, with a ratio test inside that
+    band. The matches are written as verified (calibrated) two-view geometries, which triangulation reads.
+
+    ``c2w``: image id → camera-to-world; ``view_of``: image id → training view. Wide baselines between tiny
+    frames defeat blind matching; the epipolar band removes nearly all ambiguous candidates.
+    """
+    import pycolmap
+
+    db = pycolmap.Database.open(db_path)
+    try:
+        cams = {c.camera_id: c for c in db.read_all_cameras()}
+        images = {im.image_id: im for im in db.read_all_images() if im.image_id in c2w}
+        rays, desc, fpx = {}, {}, {}
+        for i, im in images.items():
+            cam = cams[im.camera_id]
+            kp = np.asarray(db.read_keypoints(i), np.float64)[:, :2]
+            xy = np.asarray(cam.cam_from_img(kp), np.float64).reshape(-1, 2) if len(kp) else np.zeros((0, 2))
+            rays[i] = np.concatenate([xy, np.ones((len(xy), 1))], 1)
+            d = np.asarray(db.read_descriptors(i).data, np.float32)
+            desc[i] = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9)
+            fpx[i] = float(cam.mean_focal_length())
+        pairs = _pair_candidates({i: c2w[i] for i in images}, view_of, neighbours)
+        db.clear_matches()
+        db.clear_two_view_geometries()
+        n_pairs = n_matches = 0
+        partners: dict[int, list[int]] = {}
+        for a, b in sorted(pairs):
+            partners.setdefault(a, []).append(b)
+        for a, bs in partners.items():
+            bs = [b for b in bs if len(rays[b]) >= 2]
+            if len(rays[a]) < 2 or not bs:
+                continue
+            # one BLAS call per image (many small calls are slow under contention)
+            sims = desc[a] @ np.concatenate([desc[b] for b in bs]).T
+            offsets = np.cumsum([0] + [len(rays[b]) for b in bs])
+            for j, b in enumerate(bs):
+                rel = np.linalg.inv(c2w[b]) @ c2w[a]  # cam_b from cam_a
+                t = rel[:3, 3]
+                if np.linalg.norm(t) < 1e-9 * max(1.0, np.linalg.norm(c2w[a][:3, 3])):
+                    continue  # identical centres (copied poses): no epipolar geometry
+                E = _skew(t) @ rel[:3, :3]  # x_bᵀ E x_a = 0 in normalised coordinates
+                la = np.einsum("ij,nj->ni", E, rays[a])  # epipolar lines in b of the points of a
+                lb = np.einsum("ji,nj->ni", E, rays[b])  # lines in a of the points of b
+                num = np.abs(np.einsum("ik,jk->ij", la, rays[b]))  # (Na, Nb) |x_bᵀ E x_a|
+                da = num / np.maximum(np.linalg.norm(la[:, :2], axis=1), 1e-12)[:, None]  # distance in image b
+                db_ = num / np.maximum(np.linalg.norm(lb[:, :2], axis=1), 1e-12)[None, :]  # distance in image a
+                band = (da * fpx[b] <= max_epipolar_px) & (db_ * fpx[a] <= max_epipolar_px)
+                dist = np.sqrt(np.maximum(2.0 - 2.0 * sims[:, offsets[j] : offsets[j + 1]], 0.0))
+                dist[~band] = np.inf
+                m = _mutual_ratio(dist, GUIDED_RATIO)
+                if len(m) < GUIDED_MIN_MATCHES:
+                    continue
+                m = m.astype(np.uint32)
+                db.write_matches(a, b, m)
+                tvg = pycolmap.TwoViewGeometry()
+                tvg.config = pycolmap.TwoViewGeometryConfiguration.CALIBRATED
+                tvg.inlier_matches = m
+                tvg.E = E
+                db.write_two_view_geometry(a, b, tvg)
+                n_pairs += 1
+                n_matches += len(m)
+    finally:
+        db.close()
+    log.info("epipolar-guided matching: %d of %d image pairs matched, %d matches", n_pairs, len(pairs), n_matches)
+    return {"pairs_tried": len(pairs), "pairs_matched": n_pairs, "matches": n_matches}
+
+
+def _mutual_ratio(dist: np.ndarray, ratio: float) -> np.ndarray:
+    """(K, 2) index pairs that are mutual nearest neighbours in ``dist`` (inf = not allowed) and pass the ratio
+    test against the second-best candidate in both directions."""
+    if dist.shape[0] == 0 or dist.shape[1] == 0:
+        return np.zeros((0, 2), np.int64)
+    ja = np.argmin(dist, axis=1)
+    ib = np.argmin(dist, axis=0)
+    ia = np.arange(dist.shape[0])
+    d1 = dist[ia, ja]
+    mutual = np.isfinite(d1) & (ib[ja] == ia)
+
+    def second(d: np.ndarray) -> np.ndarray:
+        """Second-smallest value per row."""
+        return np.partition(d, 1, axis=1)[:, 1] if d.shape[1] >= 2 else np.full(d.shape[0], np.inf)
+
+    ok_a = d1 < ratio * second(dist)
+    ok_b = d1 < ratio * second(dist.T)[ja]
+    keep = mutual & ok_a & ok_b
+    return np.stack([ia[keep], ja[keep]], 1)

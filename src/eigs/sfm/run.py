@@ -169,8 +169,9 @@ def run_sfm(
             name_to_id = cm.extract(db, ldir, names, cam.K, cam.width, cam.height, cam.distortion, work, opts)
         report["feature_scale"] = cm.feature_scale(cam.width, cam.height, opts.feature_scale)
         px = cm.pixel_scale(opts, cam.width, cam.height)
-        with timer("matching"):
-            report["matcher"] = cm.match(db, len(names), L, opts, px=px)
+        if mode == "colmap":
+            with timer("matching"):
+                report["matcher"] = cm.match(db, len(names), L, opts, px=px)
 
         # -- poses in the source (model) frame -------------------------------------------------------
         raw = np.full((V, L, 4, 4), np.nan)
@@ -178,6 +179,14 @@ def run_sfm(
         if mode == "given":
             got = _given_poses(scene, edi.timestamps_us, scene_path)
             c2w_by_name = {n: got[v, k] for (v, k), n in zip(slots, names, strict=True)}
+            with timer("matching (epipolar-guided, known poses)"):
+                from eigs.sfm.given import guided_match
+
+                view_of = {name_to_id[n]: v for (v, _k), n in zip(slots, names, strict=True)}
+                report["matcher"] = "epipolar-guided"
+                report["guided_matching"] = guided_match(
+                    db, {name_to_id[n]: c for n, c in c2w_by_name.items()}, view_of, max_epipolar_px=4.0 * px
+                )
             with timer("triangulation (poses fixed)"):
                 from eigs.sfm.given import triangulate
 
@@ -263,7 +272,11 @@ def run_sfm(
             log.warning("%d unregistered latent frames interpolated within their view", int(interpolated.sum()))
         if no_pose:
             log.warning("views without a pose for every latent: %s", no_pose)
+        removed = _drop_single_view_points(rec, {n: v for (v, _k), n in zip(slots, names, strict=True)})
+        if removed:
+            log.info("removed %d points seen from one training view only (intra-exposure baseline)", removed)
         report["points"] = {
+            "removed_single_view": removed,
             "count": int(rec.num_points3D()),
             "mean_reprojection_error_px": float(rec.compute_mean_reprojection_error()),
             "mean_track_length": float(rec.compute_mean_track_length()) if rec.num_points3D() else 0.0,
@@ -328,6 +341,16 @@ def run_sfm(
             shutil.rmtree(work, ignore_errors=True)
     log.info("wrote %s", out_dir)
     return report
+
+
+def _drop_single_view_points(rec, view_of_name: dict[str, int]) -> int:
+    """Delete 3-D points whose observations all come from one training view: their baseline is only the
+    intra-exposure motion, so their depth is unreliable. Returns how many were removed."""
+    view_of_id = {i: view_of_name.get(im.name, -1) for i, im in rec.images.items()}
+    bad = [pid for pid, p in rec.points3D.items() if len({view_of_id[e.image_id] for e in p.track.elements}) < 2]
+    for pid in bad:
+        rec.delete_point3D(pid)
+    return len(bad)
 
 
 def _given_poses(scene, timestamps_us: np.ndarray, path: Path) -> np.ndarray:
