@@ -36,6 +36,7 @@ def main() -> None:
     set_threads(args.threads)
     rows = []
     total = 0.0
+    load0 = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(args.out or tmp)
         out.mkdir(parents=True, exist_ok=True)
@@ -66,7 +67,8 @@ def main() -> None:
              "in exposures", "crossings/step", "file MB"],
             rows,
         )
-        + f"\n\nAll {len(rows)} scenes: {total:.0f} s."
+        + f"\n\nAll {len(rows)} scenes: {total:.0f} s (1-min load average {load0:.1f} at the start, "
+        f"{os.getloadavg()[0]:.1f} at the end, on {os.cpu_count()} cores: the machine is shared)."
     )
     write_section("synth", "Synthetic scenes (eigs synth)", body)
 
