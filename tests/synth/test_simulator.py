@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from eigs.synth.simulator import EventSimulator, SensorParams, log_luma, simulate
 
@@ -199,3 +201,27 @@ def test_step_requires_increasing_time():
     sim.reset(np.zeros((2, 2)), 0)
     with pytest.raises(ValueError):
         sim.step(np.zeros((2, 2)), 0)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    seed=st.integers(0, 2**31 - 1),
+    c_pos=st.floats(0.05, 0.6),
+    c_neg=st.floats(0.05, 0.6),
+    n=st.integers(2, 30),
+    step_us=st.integers(1, 5000),
+)
+def test_reference_invariant_property(seed, c_pos, c_neg, n, step_us):
+    """For any stream and thresholds: the reference ends within (−C_off, C_on) of L, events = crossings, and
+    ON·C_on − OFF·C_off equals the reference's total move."""
+    rng = np.random.default_rng(seed)
+    frames = rng.normal(0, 1.0, (n, 3, 4)).cumsum(axis=0)
+    t = np.arange(n, dtype=np.int64) * step_us
+    params = SensorParams(threshold_pos=c_pos, threshold_neg=c_neg, **IDEAL)
+    ev, sim = simulate(frames, t, params)
+    on, off = net_counts(ev, 3, 4)
+    resid = frames[-1] - sim.ref
+    assert np.all(resid < c_pos + 1e-9) and np.all(resid > -c_neg - 1e-9)
+    assert np.allclose(sim.ref - frames[0], on * c_pos - off * c_neg)
+    assert len(ev) == sim.crossings
+    assert np.all(np.diff(ev.t) >= 0) and (len(ev) == 0 or ev.t.max() < t[-1])
