@@ -38,11 +38,21 @@ class ColmapOptions:
     num_threads: int = 2
     device: str = "auto"
     seed: int = 0
+    enhance: bool = True  # contrast-stretch dark frames for SIFT
+
+
+def load_pycolmap():
+    """Import pycolmap after cv2: in the other order, using cv2 once pycolmap is loaded aborted the process with
+    "double free or corruption" (opencv-contrib 5.0.0.93 + pycolmap 4.2.1)."""
+    import cv2  # noqa: F401
+    import pycolmap
+
+    return pycolmap
 
 
 def quiet(verbose: bool = False) -> None:
     """Route pycolmap's glog to stderr (the rule's log) and keep only warnings (everything with ``verbose``)."""
-    import pycolmap
+    pycolmap = load_pycolmap()
 
     pycolmap.logging.logtostderr = True
     pycolmap.logging.minloglevel = 0 if verbose else 1
@@ -112,7 +122,22 @@ def make_camera(K: np.ndarray, width: int, height: int, distortion: np.ndarray |
     return pycolmap.Camera(model=model, width=int(width), height=int(height), params=params, camera_id=camera_id)
 
 
-def _upsampled_copies(src_dir: Path, names: Sequence[str], dst_dir: Path, f: int) -> None:
+def enhance_for_features(im: np.ndarray) -> np.ndarray:
+    """Brighten dark frames for SIFT only (keypoint positions are unaffected): stretch the 0.5–99.5 % range of
+    the intensities to [0, 255] and apply the gamma that takes the median to 0.4. uint8 in, uint8 out."""
+    x = im.astype(np.float32)
+    lo, hi = np.percentile(x, [0.5, 99.5])
+    if hi - lo < 1.0:
+        return im
+    y = np.clip((x - lo) / (hi - lo), 0.0, 1.0)
+    med = float(np.median(y))
+    if 0.05 < med < 0.3:
+        y = y ** (np.log(0.4) / np.log(med))
+    return (y * 255.0 + 0.5).astype(np.uint8)
+
+
+def _feature_copies(src_dir: Path, names: Sequence[str], dst_dir: Path, f: int, enhance: bool) -> None:
+    """Copies of the images for feature extraction: upsampled by ``f`` (pixel-centre aligned), enhanced."""
     import cv2
 
     dst_dir.mkdir(parents=True, exist_ok=True)
@@ -120,8 +145,13 @@ def _upsampled_copies(src_dir: Path, names: Sequence[str], dst_dir: Path, f: int
         im = cv2.imread(str(src_dir / name), cv2.IMREAD_UNCHANGED)
         if im is None:
             raise EigsError(src_dir / name, "cannot read image")
-        up = cv2.resize(im, (im.shape[1] * f, im.shape[0] * f), interpolation=cv2.INTER_CUBIC)
-        cv2.imwrite(str(dst_dir / name), up)
+        if im.dtype != np.uint8:
+            im = (im.astype(np.float64) / np.iinfo(im.dtype).max * 255.0 + 0.5).astype(np.uint8)
+        if enhance:
+            im = enhance_for_features(im)
+        if f > 1:
+            im = cv2.resize(im, (im.shape[1] * f, im.shape[0] * f), interpolation=cv2.INTER_CUBIC)
+        cv2.imwrite(str(dst_dir / name), im)
 
 
 def extract(
@@ -145,9 +175,10 @@ def extract(
         raise EigsError(image_dir, f"{len(missing)} image(s) missing, e.g. {missing[0]}")
     f = feature_scale(width, height, opts.feature_scale)
     src = image_dir
-    if f > 1:
+    copies = f > 1 or opts.enhance
+    if copies:
         src = work_dir / f"features_x{f}"
-        _upsampled_copies(image_dir, names, src, f)
+        _feature_copies(image_dir, names, src, f, opts.enhance)
     reader = pycolmap.ImageReaderOptions()
     model, params = camera_params(K, distortion, scale=f)
     reader.camera_model = model
@@ -187,7 +218,7 @@ def extract(
         n_kp = [db.num_keypoints_for_image(i) for i in ids.values()]
     finally:
         db.close()
-    if f > 1:
+    if copies:
         shutil.rmtree(src, ignore_errors=True)
     log.info(
         "features: %d images (SIFT at ×%d), %d keypoints per image (median), %d with fewer than 50",

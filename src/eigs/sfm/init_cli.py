@@ -37,8 +37,9 @@ def run(args: argparse.Namespace) -> int:
     sfm = Path(args.sfm)
     if not (sfm / "points3D.bin").is_file():
         raise EigsError(sfm, "no points3D.bin (not an sfm/ output directory; run `eigs sfm` first)")
-    import pycolmap
+    from eigs.sfm.colmap import load_pycolmap
 
+    pycolmap = load_pycolmap()
     try:
         rec = pycolmap.Reconstruction(str(sfm))
     except Exception as err:  # pycolmap raises RuntimeError/ValueError for broken models

@@ -207,7 +207,11 @@ def run_sfm(
         else:
             with timer("mapping"):
                 res = cm.map_images(db, ldir, work / "map", opts, px=px)
-                if res.reconstruction is not None and report["matcher"] == "sequential":
+                if (
+                    res.reconstruction is not None
+                    and report["matcher"] == "sequential"
+                    and res.model_sizes[0] < len(names)
+                ):
                     res = _spatial_pass(db, ldir, work, res, slots, names, L, opts, px)
             report["models"] = res.model_sizes
             if res.reconstruction is None:
