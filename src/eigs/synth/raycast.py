@@ -22,6 +22,7 @@ import numpy as np
 from eigs.synth.textures import load_texture
 
 ALBEDO_FLOOR = 0.03  # darkest linear albedo of a texture (before tint)
+_BATCH_RAYS = 1 << 19  # rays per batch of frames traced together (bounds temporary memory to ~100 MB)
 _EPS_T = 1e-4  # minimum ray parameter accepted as a hit (scene units)
 F32 = np.float32
 
@@ -81,7 +82,7 @@ class Sphere(Primitive):
         dx, dy, dz = d
         a = dx * dx + dy * dy + dz * dz
         b = o[0] * dx + o[1] * dy + o[2] * dz
-        c = float(o @ o) - self.radius**2
+        c = o[0] * o[0] + o[1] * o[1] + o[2] * o[2] - self.radius**2
         disc = b * b - a * c
         ok = disc >= 0
         sq = np.sqrt(np.where(ok, disc, 0.0))
@@ -296,54 +297,75 @@ class RayCaster:
             return None
         return r0, r1, c0, c1
 
-    def _frame(
+    def _frames(
         self, c2w: np.ndarray, K: np.ndarray, gx: np.ndarray, gy: np.ndarray, s: int, shade: bool = True
     ) -> tuple[np.ndarray | None, np.ndarray]:
-        """One frame on the supersampled grid: (rgb (H·s, W·s, 3) or None, t (H·s, W·s) z-depth)."""
+        """A batch of F frames on the supersampled grid: (rgb (F, H·s, W·s, 3) or None, t (F, H·s, W·s) z-depth).
+
+        Frames are processed together (fewer, larger array operations); each primitive is tested on the union of
+        its screen rectangles over the batch (exact: the rectangles are only a culling bound)."""
+        n_f = c2w.shape[0]
         gh, gw = gx.shape
-        r_cam, o_w = c2w[:3, :3], c2w[:3, 3]
-        w2c = np.eye(4)
-        w2c[:3, :3], w2c[:3, 3] = r_cam.T, -r_cam.T @ o_w
-        best = np.full((gh, gw), np.inf, dtype=F32)
-        pid = np.full((gh, gw), -1, dtype=np.int16)
+        r_cam, o_w = c2w[:, :3, :3], c2w[:, :3, 3]
+        best = np.full((n_f, gh, gw), np.inf, dtype=F32)
+        pid = np.full((n_f, gh, gw), -1, dtype=np.int16)
         boxes: list[tuple[int, int, int, int] | None] = []
+        frames_geo = []
+        for k in range(len(self.primitives)):
+            rk = self._rot[k]
+            a = np.einsum("ji,fjk->fik", rk, r_cam).astype(F32)  # camera → local, per frame (F, 3, 3)
+            o_l = np.einsum("ji,fj->if", rk, o_w - self._ctr[k]).astype(F32)[:, :, None, None]  # (3, F, 1, 1)
+            frames_geo.append((a, o_l))
+            rects = []
+            for f in range(n_f):
+                w2c = np.eye(4)
+                w2c[:3, :3], w2c[:3, 3] = r_cam[f].T, -r_cam[f].T @ o_w[f]
+                box = self._screen_box(k, w2c, K, gh, gw, s)
+                if box is not None:
+                    rects.append(box)
+            if not rects:
+                boxes.append(None)
+                continue
+            r = np.array(rects)
+            boxes.append((int(r[:, 0].min()), int(r[:, 1].max()), int(r[:, 2].min()), int(r[:, 3].max())))
         for k, prim in enumerate(self.primitives):
-            box = self._screen_box(k, w2c, K, gh, gw, s)
-            boxes.append(box)
+            box = boxes[k]
             if box is None:
                 continue
             r0, r1, c0, c1 = box
-            a = self._rot[k].T @ r_cam  # camera → local
-            o_l = (self._rot[k].T @ (o_w - self._ctr[k])).astype(F32)
-            x, y = gx[r0:r1, c0:c1], gy[r0:r1, c0:c1]
-            d = tuple((F32(a[i, 0]) * x + F32(a[i, 1]) * y + F32(a[i, 2])) for i in range(3))
+            a, o_l = frames_geo[k]
+            x, y = gx[None, r0:r1, c0:c1], gy[None, r0:r1, c0:c1]
+            d = tuple(a[:, i, 0, None, None] * x + a[:, i, 1, None, None] * y + a[:, i, 2, None, None]
+                      for i in range(3))
             t = prim.intersect(o_l, d)
-            bv, pv = best[r0:r1, c0:c1], pid[r0:r1, c0:c1]
+            bv, pv = best[:, r0:r1, c0:c1], pid[:, r0:r1, c0:c1]
             np.copyto(pv, k, where=t < bv)
             np.minimum(bv, t, out=bv)
         if not shade:
             return None, best
-        out = np.empty((gh, gw, 3), dtype=F32)
+        out = np.empty((n_f, gh, gw, 3), dtype=F32)
         out[:] = self.background
         for k, prim in enumerate(self.primitives):
             box = boxes[k]
             if box is None:
                 continue
             r0, r1, c0, c1 = box
-            mask = pid[r0:r1, c0:c1] == k
-            if not mask.any():
+            mask = pid[:, r0:r1, c0:c1] == k
+            fi, ii, jj = np.nonzero(mask)
+            if fi.size == 0:
                 continue
-            x, y, t = gx[r0:r1, c0:c1][mask], gy[r0:r1, c0:c1][mask], best[r0:r1, c0:c1][mask]
-            a = self._rot[k].T @ r_cam
-            o_l = (self._rot[k].T @ (o_w - self._ctr[k])).astype(F32)
-            p = tuple(o_l[i] + t * (F32(a[i, 0]) * x + F32(a[i, 1]) * y + F32(a[i, 2])) for i in range(3))
+            x, y = gx[r0:r1, c0:c1][ii, jj], gy[r0:r1, c0:c1][ii, jj]
+            t = best[:, r0:r1, c0:c1][mask]
+            a, o_l = frames_geo[k]
+            af, of = a[fi], o_l[:, :, 0, 0][:, fi]
+            p = tuple(of[i] + t * (af[:, i, 0] * x + af[:, i, 1] * y + af[:, i, 2]) for i in range(3))
             n, u, v = prim.surface(p)
             shade_k = np.full(t.shape, self.lighting.ambient, dtype=F32)
             for ldir, gain in self._lights:
                 ll = (self._rot[k].T @ ldir).astype(F32)  # light direction in the local frame
                 shade_k += F32(gain) * np.maximum(n[0] * ll[0] + n[1] * ll[1] + n[2] * ll[2], 0.0)
             col = sample_texture(self._tex[k], self._tex_size, u, v) * shade_k[:, None]
-            out[r0:r1, c0:c1][mask] = col
+            out[:, r0:r1, c0:c1][mask] = col
         np.clip(out, 0.0, 1.0, out=out)
         return out, best
 
@@ -362,7 +384,8 @@ class RayCaster:
 
         Each pixel averages ``supersample``² stratified rays (box filter) in linear intensity. Returns (F, H, W, 3)
         float32 images; with ``want_depth`` also the z-depth of one ray through each pixel centre. ``threads`` > 1
-        renders frames in parallel threads (NumPy releases the GIL in its array loops); results are identical.
+        renders batches of frames in parallel threads (NumPy releases the GIL in its array loops); results do not
+        depend on ``threads`` or the batching.
         """
         c2w = np.asarray(c2w, dtype=np.float64)
         if c2w.ndim == 2:
@@ -370,29 +393,32 @@ class RayCaster:
         K = np.asarray(K, dtype=np.float64)
         s = max(int(supersample), 1)
         gx, gy = self._grid(K, width, height, s)
-        rgb = np.empty((c2w.shape[0], height, width, 3), dtype=F32)
+        n = c2w.shape[0]
+        rgb = np.empty((n, height, width, 3), dtype=F32)
         inv = F32(1.0 / (s * s))
+        batch = max(1, min(_BATCH_RAYS // gx.size, -(-n // max(threads, 1))))
+        chunks = [range(f0, min(n, f0 + batch)) for f0 in range(0, n, batch)]
 
-        def one(f: int) -> None:
-            img, _ = self._frame(c2w[f], K, gx, gy, s)
-            a = img.reshape(height, s, width, s, 3)
-            acc = a[:, 0, :, 0].copy()
+        def run(fs: range) -> None:
+            img, _ = self._frames(c2w[fs.start : fs.stop], K, gx, gy, s)
+            a = img.reshape(len(fs), height, s, width, s, 3)
+            acc = a[:, :, 0, :, 0].copy()
             for i in range(s):
                 for j in range(s):
                     if i or j:
-                        acc += a[:, i, :, j]
-            rgb[f] = acc * inv
+                        acc += a[:, :, i, :, j]
+            rgb[fs.start : fs.stop] = acc * inv
 
-        if threads > 1 and c2w.shape[0] > 1:
+        if threads > 1 and len(chunks) > 1:
             from concurrent.futures import ThreadPoolExecutor
 
             with ThreadPoolExecutor(max_workers=threads) as pool:
-                list(pool.map(one, range(c2w.shape[0])))
+                list(pool.map(run, chunks))
         else:
-            for f in range(c2w.shape[0]):
-                one(f)
+            for fs in chunks:
+                run(fs)
         depth = None
         if want_depth:
             cx, cy = self._grid(K, width, height, 1)
-            depth = np.stack([self._frame(c2w[f], K, cx, cy, 1, shade=False)[1] for f in range(c2w.shape[0])])
+            depth = self._frames(c2w, K, cx, cy, 1, shade=False)[1]
         return RenderResult(rgb, depth)
