@@ -13,6 +13,7 @@ Writes the ``edi`` section of docs/benchmarks.md.
 from __future__ import annotations
 
 import argparse
+import inspect
 import subprocess
 import sys
 import time
@@ -52,8 +53,10 @@ def sharp_at(name: str, overrides: dict | None, times: np.ndarray, threads: int)
     spec = get_spec(name)
     p = resolve_params(name, ("overrides", overrides))
     K = g.intrinsics(p["width"], p["height"], p["fov_deg"])
-    caster = RayCaster(spec.build(), background=spec.background, lighting=spec.lighting,
-                       texture_size=p["texture_size"], pixel_footprint=p["orbit_radius"] / K[0, 0])
+    kw = {"background": spec.background, "lighting": spec.lighting, "texture_size": p["texture_size"]}
+    if "pixel_footprint" in inspect.signature(RayCaster.__init__).parameters:  # older generator versions
+        kw["pixel_footprint"] = p["orbit_radius"] / K[0, 0]
+    caster = RayCaster(spec.build(), **kw)
     root = np.random.default_rng(p["seed"])
     rng_shake, _ = (np.random.default_rng(s) for s in root.bit_generator.seed_seq.spawn(2))
     path, _ = g.build_path(p, spec, rng_shake)
