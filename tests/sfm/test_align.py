@@ -147,3 +147,23 @@ def test_canonical_transform_centres_and_scales():
     np.testing.assert_allclose(sim.R, np.eye(3))
     same = canonical_transform(np.ones((4, 3)))
     assert same.scale == 1.0
+
+
+def test_fill_within_views_interpolates_in_time_and_never_across_views():
+    from eigs.sfm.poses import fill_within_views
+
+    v, l_ = 3, 5
+    c2w = np.tile(np.eye(4), (v, l_, 1, 1))
+    t = np.tile(np.arange(l_) * 10, (v, 1)).astype(np.int64)
+    for k in range(l_):
+        c2w[:, k, :3, 3] = [k, 0, 0]
+        c2w[:, k, :3, :3] = rot([0, 0, 1], 10.0 * k)
+    known = np.ones((v, l_), bool)
+    known[0, 2] = False  # interior: interpolated exactly (linear motion, constant angular rate)
+    known[1, 4] = False  # beyond the last known latent: held
+    known[2, :] = False  # no known latent: NaN
+    filled, interp = fill_within_views(c2w, known, t)
+    np.testing.assert_allclose(filled[0, 2], c2w[0, 2], atol=1e-12)
+    np.testing.assert_allclose(filled[1, 4], c2w[1, 3], atol=1e-12)
+    assert np.isnan(filled[2]).all()
+    assert interp[0, 2] and interp[1, 4] and not interp[2].any() and interp.sum() == 2
