@@ -145,6 +145,8 @@ class TestCameras:
       error of the registration's inliers (NaN when not registered); ``num_inliers``: (S,) int64.
     """
 
+    __test__ = False  # not a pytest test class despite the name
+
     c2w: np.ndarray
     K: np.ndarray
     width: int
