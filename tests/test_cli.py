@@ -46,9 +46,8 @@ def test_user_error_is_one_line_without_traceback(tmp_path):
 
 
 def test_scene_info_and_validate(tmp_path, capsys):
-    from tests.scene.test_scene_file import make_scene
-
     from eigs.scene import write_scene
+    from tests.scene.test_scene_file import make_scene
 
     path = tmp_path / "s.h5"
     write_scene(make_scene(), path)

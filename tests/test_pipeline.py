@@ -18,11 +18,22 @@ REPO = Path(__file__).resolve().parents[1]
 def test_toy_pipeline_through_init(tmp_path):
     proc = subprocess.run(
         [
-            sys.executable, "-m", "snakemake", "all_sfm", "--cores", "2",
-            "-s", str(REPO / "workflow" / "Snakefile"), "--directory", str(tmp_path),
+            sys.executable,
+            "-m",
+            "snakemake",
+            "all_sfm",
+            "--cores",
+            "2",
+            "-s",
+            str(REPO / "workflow" / "Snakefile"),
+            "--directory",
+            str(tmp_path),
             f"--configfile={REPO / 'config' / 'toy.yaml'}",
         ],
-        capture_output=True, text=True, check=False, timeout=900,
+        capture_output=True,
+        text=True,
+        check=False,
+        timeout=900,
     )
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     res = tmp_path / "results" / "toy"

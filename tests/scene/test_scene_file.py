@@ -75,7 +75,9 @@ def make_scene(*, raw: bool = True, binned: bool = False, frames: bool = True, g
         "ground-truth",
     )
     if gt:
-        scene.trajectory = Trajectory(np.arange(0, 3000, 100, dtype=np.int64), np.stack([pose(0.001 * i, 0.0) for i in range(30)]))
+        scene.trajectory = Trajectory(
+            np.arange(0, 3000, 100, dtype=np.int64), np.stack([pose(0.001 * i, 0.0) for i in range(30)])
+        )
         scene.sharp = SharpImages(
             rng.integers(0, 256, (4, H, W, 3), dtype=np.uint8),
             np.stack([pose(0.3 * i, 1.0) for i in range(4)]),
@@ -278,6 +280,7 @@ def test_validation_on_read(tmp_path, mutate, message):
     write_scene(scene, path)
     mutate(scene)
     with h5py.File(path, "r+") as f:
+
         def put(name, data):
             del f[name]
             f.create_dataset(name, data=data)
