@@ -32,7 +32,7 @@ import numpy as np
 from eigs.events.edi import LOG_EPS, ExposureIntegral, edi_continuous, edi_discrete, luma
 
 C_MIN, C_MAX = 0.05, 1.0
-TV_WEIGHT = 0.05
+TV_WEIGHT = 0.01
 GRID_POINTS = 13
 REL_TOL = 1e-3
 SMOOTH_SIGMA = 1.0
