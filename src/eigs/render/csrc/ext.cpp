@@ -64,7 +64,7 @@ std::tuple<Tensor, Tensor, Tensor, Tensor, Tensor> project_fwd(Tensor means, Ten
                                         scales.data_ptr<scalar_t>(), opacities.data_ptr<scalar_t>(), cam,
                                         means2d.data_ptr<scalar_t>(), conics.data_ptr<scalar_t>(),
                                         depths.data_ptr<scalar_t>(), extents.data_ptr<scalar_t>(),
-                                        radii.data_ptr<int32_t>(), threads(n, 2048));
+                                        radii.data_ptr<int32_t>(), threads(n, 512));
     });
     return {means2d, conics, depths, extents, radii};
 }
@@ -87,7 +87,7 @@ std::tuple<Tensor, Tensor, Tensor> project_bwd(Tensor means, Tensor quats, Tenso
                                          scales.data_ptr<scalar_t>(), cam, radii.data_ptr<int32_t>(),
                                          v_means2d.data_ptr<scalar_t>(), v_conics.data_ptr<scalar_t>(),
                                          v_means.data_ptr<scalar_t>(), v_quats.data_ptr<scalar_t>(),
-                                         v_scales.data_ptr<scalar_t>(), threads(n, 2048));
+                                         v_scales.data_ptr<scalar_t>(), threads(n, 512));
     });
     return {v_means, v_quats, v_scales};
 }
@@ -102,20 +102,15 @@ std::tuple<Tensor, Tensor> isect_tiles(Tensor means2d, Tensor extents, Tensor de
     const int64_t n = means2d.size(0);
     const int64_t n_tiles = ((width + 15) / 16) * ((height + 15) / 16);
     Tensor offsets = torch::empty({n_tiles + 1}, means2d.options().dtype(torch::kInt64));
-    Tensor ids;
+    eigs::IsectPlan plan;
+    int64_t total = 0;
     AT_DISPATCH_FLOATING_TYPES(dt, "isect_tiles", [&] {
-        int64_t* off = offsets.data_ptr<int64_t>();
-        const int64_t total = eigs::isect_count<scalar_t>(n, means2d.data_ptr<scalar_t>(),
-                                                          extents.data_ptr<scalar_t>(), radii.data_ptr<int32_t>(),
-                                                          width, height, off + 1);
-        off[0] = 0;
-        for (int64_t t = 0; t < n_tiles; ++t) off[t + 1] += off[t];
-        TORCH_CHECK(off[n_tiles] == total, "isect_tiles: inconsistent pair count");
-        ids = torch::empty({total}, means2d.options().dtype(torch::kInt64));
-        eigs::isect_fill<scalar_t>(n, means2d.data_ptr<scalar_t>(), extents.data_ptr<scalar_t>(),
-                                   depths.data_ptr<scalar_t>(), radii.data_ptr<int32_t>(), width, height, off,
-                                   ids.data_ptr<int64_t>());
+        total = eigs::isect_plan<scalar_t>(n, means2d.data_ptr<scalar_t>(), extents.data_ptr<scalar_t>(),
+                                           depths.data_ptr<scalar_t>(), radii.data_ptr<int32_t>(), width, height,
+                                           offsets.data_ptr<int64_t>(), plan, threads(n, 1024));
     });
+    Tensor ids = torch::empty({total}, means2d.options().dtype(torch::kInt64));
+    eigs::isect_fill(plan, ids.data_ptr<int64_t>());
     return {offsets, ids};
 }
 

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <cstdint>
+#include <vector>
 
 namespace eigs {
 
@@ -31,16 +32,26 @@ void project_backward(int64_t n, const S* means, const S* quats, const S* scales
                       const int32_t* radii, const S* v_means2d, const S* v_conics, S* v_means, S* v_quats,
                       S* v_scales, int nthreads);
 
-// Tile binning.  Counts (Gaussian, tile) pairs for Gaussians with radii > 0 and returns their number.
-template <typename S>
-int64_t isect_count(int64_t n, const S* means2d, const S* extents, const int32_t* radii, int64_t width,
-                    int64_t height, int64_t* tile_counts /* (n_tiles) */);
+// Tile binning, in two steps so that the caller can allocate flatten_ids in between.
+// isect_plan: for the Gaussians with radii > 0, the order (ascending depth, ties by index), their tile
+// rectangles and the pair counts; writes tile_offsets (n_tiles + 1, exclusive prefix sum) and returns n_isects.
+// isect_fill: flatten_ids (n_isects): per tile (row-major tile order), the Gaussian ids in that order.
+// Parallel over nthreads chunks (sort per chunk + merge; per-chunk tile cursors): the result is the same for
+// any thread count.
+struct IsectPlan {
+    std::vector<int64_t> order;   // visible Gaussians in (depth, index) order
+    std::vector<int32_t> rect;    // per Gaussian: tile columns [0], [1], tile rows [2], [3] (inclusive)
+    std::vector<int64_t> cursor;  // nchunks x n_tiles: where chunk c writes into tile t
+    int nchunks = 1;
+    int64_t n_tiles = 0, tiles_x = 0;
+};
 
-// Fills flatten_ids (n_isects): per tile (row-major tile order), the Gaussian ids in ascending depth, ties by
-// index.  tile_offsets (n_tiles + 1) must hold the exclusive prefix sum of tile_counts.
 template <typename S>
-void isect_fill(int64_t n, const S* means2d, const S* extents, const S* depths, const int32_t* radii,
-                int64_t width, int64_t height, const int64_t* tile_offsets, int64_t* flatten_ids);
+int64_t isect_plan(int64_t n, const S* means2d, const S* extents, const S* depths, const int32_t* radii,
+                   int64_t width, int64_t height, int64_t* tile_offsets /* (n_tiles + 1) */, IsectPlan& plan,
+                   int nthreads);
+
+void isect_fill(IsectPlan& plan, int64_t* flatten_ids);
 
 // Forward compositing.  colors (N,D), background (D) -> image (H,W,D) = C + T bg, trans (H,W) = final T,
 // last (H,W) int32 = position (within its tile's list) of the last contributing Gaussian, -1 if none.

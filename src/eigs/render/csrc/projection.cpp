@@ -302,45 +302,139 @@ void project_backward(int64_t n, const S* means, const S* quats, const S* scales
     }
 }
 
+namespace {
+
+// Sort key of a visible Gaussian: ascending depth, ties by index (keys are unique, so any correct sort or merge
+// gives the same order).
 template <typename S>
-int64_t isect_count(int64_t n, const S* means2d, const S* extents, const int32_t* radii, int64_t width,
-                    int64_t height, int64_t* tile_counts) {
+struct DepthKey {
+    S depth;
+    int64_t g;
+    bool operator<(const DepthKey& o) const { return depth < o.depth || (depth == o.depth && g < o.g); }
+};
+
+// [lo, hi) of chunk c of n items split into k near-equal chunks.
+inline int64_t chunk_lo(int64_t n, int k, int c) { return n * c / k; }
+
+}  // namespace
+
+template <typename S>
+int64_t isect_plan(int64_t n, const S* means2d, const S* extents, const S* depths, const int32_t* radii,
+                   int64_t width, int64_t height, int64_t* tile_offsets, IsectPlan& plan, int nthreads) {
     const int64_t tiles_x = (width + kTile - 1) / kTile, tiles_y = (height + kTile - 1) / kTile;
-    std::fill(tile_counts, tile_counts + tiles_x * tiles_y, int64_t(0));
-    int64_t total = 0;
-    for (int64_t g = 0; g < n; ++g) {
-        if (radii[2 * g] <= 0) continue;
-        int64_t j0, j1, i0, i1;
-        pixel_range(double(means2d[2 * g]), double(extents[2 * g]), width, j0, j1);
-        pixel_range(double(means2d[2 * g + 1]), double(extents[2 * g + 1]), height, i0, i1);
-        if (j0 > j1 || i0 > i1) continue;
-        for (int64_t ty = i0 / kTile; ty <= i1 / kTile; ++ty)
-            for (int64_t tx = j0 / kTile; tx <= j1 / kTile; ++tx) ++tile_counts[ty * tiles_x + tx];
-        total += (i1 / kTile - i0 / kTile + 1) * (j1 / kTile - j0 / kTile + 1);
+    const int64_t n_tiles = tiles_x * tiles_y;
+    const int k = std::max(1, nthreads);
+    plan.n_tiles = n_tiles;
+    plan.tiles_x = tiles_x;
+    plan.nchunks = k;
+    plan.rect.assign(size_t(4 * std::max<int64_t>(n, 1)), 0);
+    std::vector<int64_t> kept(size_t(k) + 1, 0);
+    std::vector<DepthKey<S>> keys(static_cast<size_t>(n)), tmp;
+    plan.order.resize(size_t(n));
+    plan.cursor.assign(size_t(k) * size_t(n_tiles), 0);
+    int32_t* rect = plan.rect.data();
+    int64_t* cnt = plan.cursor.data();
+#pragma omp parallel num_threads(k)
+    {
+        // 1. per chunk of Gaussians: tile rectangles of the visible ones, compacted into keys, sorted.
+#pragma omp for schedule(static, 1)
+        for (int c = 0; c < k; ++c) {
+            const int64_t lo = chunk_lo(n, k, c), hi = chunk_lo(n, k, c + 1);
+            int64_t m = 0;
+            for (int64_t g = lo; g < hi; ++g) {
+                int32_t* r = rect + 4 * g;
+                r[0] = r[2] = 1;
+                r[1] = r[3] = 0;
+                if (radii[2 * g] <= 0) continue;
+                int64_t j0, j1, i0, i1;
+                pixel_range(double(means2d[2 * g]), double(extents[2 * g]), width, j0, j1);
+                pixel_range(double(means2d[2 * g + 1]), double(extents[2 * g + 1]), height, i0, i1);
+                if (j0 > j1 || i0 > i1) continue;
+                r[0] = int32_t(j0 / kTile);
+                r[1] = int32_t(j1 / kTile);
+                r[2] = int32_t(i0 / kTile);
+                r[3] = int32_t(i1 / kTile);
+                keys[size_t(lo + m)] = DepthKey<S>{depths[g], g};
+                ++m;
+            }
+            kept[size_t(c) + 1] = m;
+            std::sort(keys.begin() + lo, keys.begin() + lo + m);
+        }
+        // 2. merge the sorted runs (serial for one run; pairwise merges otherwise).
+#pragma omp single
+        {
+            int64_t pos = 0;
+            std::vector<int64_t> starts;
+            for (int c = 0; c < k; ++c) {
+                const int64_t lo = chunk_lo(n, k, c), m = kept[size_t(c) + 1];
+                std::move(keys.begin() + lo, keys.begin() + lo + m, keys.begin() + pos);
+                starts.push_back(pos);
+                pos += m;
+            }
+            starts.push_back(pos);
+            kept[0] = pos;
+            tmp.resize(size_t(pos));
+            // Pairwise merge rounds; a round's merges are independent.
+            while (starts.size() > 2) {
+                const int64_t runs = int64_t(starts.size()) - 1;
+                std::vector<int64_t> next;
+                for (int64_t r = 0; r < runs; r += 2) {
+                    next.push_back(starts[size_t(r)]);
+                    const int64_t a = starts[size_t(r)], b = starts[size_t(r) + 1];
+                    const int64_t e = r + 2 <= runs ? starts[size_t(r) + 2] : b;
+#pragma omp task firstprivate(a, b, e)
+                    std::merge(keys.begin() + a, keys.begin() + b, keys.begin() + b, keys.begin() + e,
+                               tmp.begin() + a);
+                }
+#pragma omp taskwait
+                next.push_back(pos);
+                std::swap(keys, tmp);
+                starts.swap(next);
+            }
+        }
+        const int64_t m = kept[0];
+        // 3. per chunk of the sorted order: the order itself and its pair count per tile.
+#pragma omp for schedule(static, 1)
+        for (int c = 0; c < k; ++c) {
+            int64_t* cc = cnt + size_t(c) * size_t(n_tiles);
+            for (int64_t i = chunk_lo(m, k, c); i < chunk_lo(m, k, c + 1); ++i) {
+                const int64_t g = keys[size_t(i)].g;
+                plan.order[size_t(i)] = g;
+                const int32_t* r = rect + 4 * g;
+                for (int64_t ty = r[2]; ty <= r[3]; ++ty)
+                    for (int64_t tx = r[0]; tx <= r[1]; ++tx) ++cc[ty * tiles_x + tx];
+            }
+        }
     }
+    plan.order.resize(size_t(kept[0]));
+    // 4. offsets = exclusive prefix sum over tiles; chunk c of tile t starts after chunks < c of that tile.
+    int64_t total = 0;
+    for (int64_t t = 0; t < n_tiles; ++t) {
+        tile_offsets[t] = total;
+        for (int c = 0; c < k; ++c) {
+            int64_t& x = cnt[size_t(c) * size_t(n_tiles) + size_t(t)];
+            const int64_t v = x;
+            x = total;
+            total += v;
+        }
+    }
+    tile_offsets[n_tiles] = total;
     return total;
 }
 
-template <typename S>
-void isect_fill(int64_t n, const S* means2d, const S* extents, const S* depths, const int32_t* radii,
-                int64_t width, int64_t height, const int64_t* tile_offsets, int64_t* flatten_ids) {
-    const int64_t tiles_x = (width + kTile - 1) / kTile, tiles_y = (height + kTile - 1) / kTile;
-    std::vector<int64_t> order;
-    order.reserve(size_t(n));
-    for (int64_t g = 0; g < n; ++g)
-        if (radii[2 * g] > 0) order.push_back(g);
-    // Ascending depth, ties by index; then a stable scatter by tile keeps that order inside each tile.
-    std::sort(order.begin(), order.end(), [depths](int64_t u, int64_t v) {
-        return depths[u] < depths[v] || (depths[u] == depths[v] && u < v);
-    });
-    std::vector<int64_t> cursor(tile_offsets, tile_offsets + tiles_x * tiles_y);
-    for (const int64_t g : order) {
-        int64_t j0, j1, i0, i1;
-        pixel_range(double(means2d[2 * g]), double(extents[2 * g]), width, j0, j1);
-        pixel_range(double(means2d[2 * g + 1]), double(extents[2 * g + 1]), height, i0, i1);
-        if (j0 > j1 || i0 > i1) continue;
-        for (int64_t ty = i0 / kTile; ty <= i1 / kTile; ++ty)
-            for (int64_t tx = j0 / kTile; tx <= j1 / kTile; ++tx) flatten_ids[cursor[ty * tiles_x + tx]++] = g;
+void isect_fill(IsectPlan& plan, int64_t* flatten_ids) {
+    const int k = plan.nchunks;
+    const int64_t m = int64_t(plan.order.size()), n_tiles = plan.n_tiles, tiles_x = plan.tiles_x;
+    const int32_t* rect = plan.rect.data();
+#pragma omp parallel for num_threads(k) schedule(static, 1)
+    for (int c = 0; c < k; ++c) {
+        int64_t* cur = plan.cursor.data() + size_t(c) * size_t(n_tiles);
+        for (int64_t i = chunk_lo(m, k, c); i < chunk_lo(m, k, c + 1); ++i) {
+            const int64_t g = plan.order[size_t(i)];
+            const int32_t* r = rect + 4 * g;
+            for (int64_t ty = r[2]; ty <= r[3]; ++ty)
+                for (int64_t tx = r[0]; tx <= r[1]; ++tx) flatten_ids[cur[ty * tiles_x + tx]++] = g;
+        }
     }
 }
 
@@ -349,9 +443,8 @@ void isect_fill(int64_t n, const S* means2d, const S* extents, const S* depths, 
                                      S*, S*, S*, int32_t*, int);                                              \
     template void project_backward<S>(int64_t, const S*, const S*, const S*, const Camera<S>&, const int32_t*, \
                                       const S*, const S*, S*, S*, S*, int);                                   \
-    template int64_t isect_count<S>(int64_t, const S*, const S*, const int32_t*, int64_t, int64_t, int64_t*);  \
-    template void isect_fill<S>(int64_t, const S*, const S*, const S*, const int32_t*, int64_t, int64_t,       \
-                                const int64_t*, int64_t*);
+    template int64_t isect_plan<S>(int64_t, const S*, const S*, const S*, const int32_t*, int64_t, int64_t,  \
+                                   int64_t*, IsectPlan&, int);
 
 EIGS_INSTANTIATE_PROJ(float)
 EIGS_INSTANTIATE_PROJ(double)

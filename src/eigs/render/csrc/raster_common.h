@@ -4,6 +4,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <numeric>
+#include <vector>
 
 #include "pair_math.h"
 
@@ -50,6 +52,20 @@ inline void box_rows(double my, double ey, int64_t y0, int rows, int& r0, int& r
     }
     r0 = int(a);
     r1 = int(b);
+}
+
+// Tiles in the order the threads pick them up: with one thread row-major; with several the longest lists
+// first (ties by index), so that the dynamic schedule does not end with one thread on a long tile while the
+// others idle.  Tiles are independent, so the order never changes the results.
+inline std::vector<int64_t> tile_schedule(const int64_t* tile_offsets, int64_t n_tiles, int nthreads) {
+    std::vector<int64_t> order(static_cast<size_t>(n_tiles));
+    std::iota(order.begin(), order.end(), int64_t(0));
+    if (nthreads > 1)
+        std::sort(order.begin(), order.end(), [tile_offsets](int64_t a, int64_t b) {
+            const int64_t ca = tile_offsets[a + 1] - tile_offsets[a], cb = tile_offsets[b + 1] - tile_offsets[b];
+            return ca > cb || (ca == cb && a < b);
+        });
+    return order;
 }
 
 }  // namespace eigs

@@ -7,6 +7,8 @@
 #include <cstdint>
 #include <vector>
 
+#include <omp.h>
+
 #include "kernels.h"
 #include "raster_common.h"
 
@@ -212,26 +214,33 @@ void rasterize_backward(int64_t n, const S* means2d, const S* conics, const S* c
                       height,  tile_offsets, flatten_ids, trans,     last,    v_image,    v_alpha, pair_grads};
     const BwdFn<S> fn = pick_bwd(means2d, d, resolve_isa(isa));
     const int64_t n_tiles = ((width + kTile - 1) / kTile) * ((height + kTile - 1) / kTile);
-#pragma omp parallel num_threads(nthreads)
-    {
-        BwdScratch<S> ws(d);
-#pragma omp for schedule(dynamic, 1)
-        for (int64_t t = 0; t < n_tiles; ++t) fn(A, t, ws);
-    }
-    // Fixed-order reduction of the per-pair gradients into per-Gaussian gradients.
-    (void)n;
+    const std::vector<int64_t> order = tile_schedule(tile_offsets, n_tiles, nthreads);
     const int64_t n_isects = tile_offsets[n_tiles];
     const int64_t P = 6 + d;
-    for (int64_t i = 0; i < n_isects; ++i) {
-        const int64_t g = flatten_ids[i];
-        const S* pg = pair_grads + i * P;
-        v_means2d[2 * g] += pg[0];
-        v_means2d[2 * g + 1] += pg[1];
-        v_conics[3 * g] += pg[2];
-        v_conics[3 * g + 1] += pg[3];
-        v_conics[3 * g + 2] += pg[4];
-        v_opacities[g] += pg[5];
-        for (int64_t ch = 0; ch < d; ++ch) v_colors[g * d + ch] += pg[6 + ch];
+#pragma omp parallel num_threads(nthreads)
+    {
+        {
+            BwdScratch<S> ws(d);
+#pragma omp for schedule(dynamic, 1)
+            for (int64_t t = 0; t < n_tiles; ++t) fn(A, order[size_t(t)], ws);
+        }
+        // Reduction of the per-pair gradients into per-Gaussian gradients, each Gaussian's pairs summed in isect
+        // order (a fixed order).  Thread i owns the Gaussians of id range i and scans all pairs: every sum is
+        // the same for any thread count.
+        const int nt = omp_get_num_threads(), tid = omp_get_thread_num();
+        const int64_t lo = n * tid / nt, hi = n * (tid + 1) / nt;
+        for (int64_t i = 0; i < n_isects; ++i) {
+            const int64_t g = flatten_ids[i];
+            if (g < lo || g >= hi) continue;
+            const S* pg = pair_grads + i * P;
+            v_means2d[2 * g] += pg[0];
+            v_means2d[2 * g + 1] += pg[1];
+            v_conics[3 * g] += pg[2];
+            v_conics[3 * g + 1] += pg[3];
+            v_conics[3 * g + 2] += pg[4];
+            v_opacities[g] += pg[5];
+            for (int64_t ch = 0; ch < d; ++ch) v_colors[g * d + ch] += pg[6 + ch];
+        }
     }
 }
 

@@ -170,11 +170,12 @@ void rasterize_forward(const S* means2d, const S* conics, const S* colors, const
                       height,  tile_offsets, flatten_ids, image,     trans,   last};
     const FwdFn<S> fn = pick_fwd(means2d, d, resolve_isa(isa));
     const int64_t n_tiles = ((width + kTile - 1) / kTile) * ((height + kTile - 1) / kTile);
+    const std::vector<int64_t> order = tile_schedule(tile_offsets, n_tiles, nthreads);
 #pragma omp parallel num_threads(nthreads)
     {
         FwdScratch<S> ws(d);
 #pragma omp for schedule(dynamic, 1)
-        for (int64_t t = 0; t < n_tiles; ++t) fn(A, t, ws);
+        for (int64_t t = 0; t < n_tiles; ++t) fn(A, order[size_t(t)], ws);
     }
 }
 
