@@ -39,6 +39,11 @@ class ColmapOptions:
     device: str = "auto"
     seed: int = 0
     enhance: bool = True  # contrast-stretch dark frames for SIFT
+    # Incremental mapper on small (upsampled) frames: reprojection thresholds in original pixels. COLMAP's
+    # defaults (4 px; 12 px for absolute pose) suit megapixel images; on 128×96 frames they admitted wrong
+    # registrations that folded or bent the orbit (see docs/sfm.md).
+    small_max_error_px: float = 1.0
+    small_abs_pose_max_error_px: float = 2.0
 
 
 def load_pycolmap():
@@ -113,6 +118,18 @@ def apply_thresholds(o, px: float) -> None:
     o.mapper.filter_max_reproj_error = 4.0 * px
     o.triangulation.merge_max_reproj_error = 4.0 * px
     o.triangulation.complete_max_reproj_error = 4.0 * px
+
+
+def tighten_for_small_frames(o, opts: ColmapOptions) -> None:
+    """Cap the incremental mapper's reprojection thresholds of IncrementalPipelineOptions ``o`` at
+    ``opts.small_max_error_px`` (initial pair, filtering, triangulation) and ``opts.small_abs_pose_max_error_px``
+    (registration of new images), in original pixels."""
+    e, a = float(opts.small_max_error_px), float(opts.small_abs_pose_max_error_px)
+    o.mapper.init_max_error = min(o.mapper.init_max_error, e)
+    o.mapper.filter_max_reproj_error = min(o.mapper.filter_max_reproj_error, e)
+    o.triangulation.merge_max_reproj_error = min(o.triangulation.merge_max_reproj_error, e)
+    o.triangulation.complete_max_reproj_error = min(o.triangulation.complete_max_reproj_error, e)
+    o.mapper.abs_pose_max_error = min(o.mapper.abs_pose_max_error, a)
 
 
 def make_camera(K: np.ndarray, width: int, height: int, distortion: np.ndarray | None, camera_id: int = 1):
@@ -323,6 +340,8 @@ def map_images(
         o.multiple_models = True
         o.min_model_size = 3
         apply_thresholds(o, px)
+        if px < 1.0:  # small frames, SIFT on upsampled copies: tighter thresholds (original pixels)
+            tighten_for_small_frames(o, opts)
         recs = pycolmap.incremental_mapping(db_path, image_dir, out_dir, options=o)
     models = sorted(recs.values(), key=lambda r: r.num_reg_images(), reverse=True)
     if not models:
