@@ -27,7 +27,13 @@ from eigs.scene.model import (
     SharpImages,
     Trajectory,
 )
-from eigs.scene.validate import check_event_chunk, check_view_index, validate, validate_header
+from eigs.scene.validate import (
+    check_event_chunk,
+    check_event_dtypes,
+    check_view_index,
+    validate,
+    validate_header,
+)
 from eigs.util.atomic import atomic_path
 
 EVENT_CHUNK_ROWS = 1 << 20  # HDF5 chunk length for event arrays
@@ -187,17 +193,17 @@ class SceneWriter:
 
 def write_scene(scene: Scene, path: str | os.PathLike, *, compression: str | None = None) -> None:
     """Validate ``scene`` and write it atomically to ``path``. ``compression``: None (default, fastest),
-    ``"gzip"`` or ``"lzf"``."""
-    validate(str(path), scene)
+    ``"gzip"`` or ``"lzf"``. The writer validates the header on entry, the events as they are appended and the
+    view index at the end, so nothing is checked twice."""
     header = Scene(**{**scene.__dict__, "events": None})
+    if scene.events is not None:
+        check_event_dtypes(str(path), scene.events)
     with SceneWriter(path, header, compression=compression) as w:
         if scene.events is not None:
             ev = scene.events
-            w.append_events(ev.x, ev.y, ev.t, ev.p)
+            w.append_events(ev.x, ev.y, ev.t, ev.p)  # creates the event datasets even when empty
             if ev.view_index is not None:
                 w.set_view_index(ev.view_index)
-            elif len(ev) == 0:
-                w._event_datasets()
 
 
 def _opt(f: h5py.File, name: str) -> np.ndarray | None:

@@ -210,11 +210,8 @@ def validate_header(path: str, scene: Scene) -> None:
             raise EigsError(path, f"gt/sharp/view must be −1 or a view index below {n_views}")
 
 
-def validate_events(path: str, scene: Scene) -> None:
-    """The raw event arrays and their view index (chunked)."""
-    ev = scene.events
-    if ev is None:
-        return
+def check_event_dtypes(path: str, ev: Events) -> None:
+    """x, y uint16; t int64; p int8 (no silent conversion of, e.g., float seconds)."""
     for name, a, dt in (
         ("events/x", ev.x, np.uint16),
         ("events/y", ev.y, np.uint16),
@@ -222,6 +219,14 @@ def validate_events(path: str, scene: Scene) -> None:
         ("events/p", ev.p, np.int8),
     ):
         _dtype(path, name, a, dt)
+
+
+def validate_events(path: str, scene: Scene) -> None:
+    """The raw event arrays and their view index (chunked)."""
+    ev = scene.events
+    if ev is None:
+        return
+    check_event_dtypes(path, ev)
     last = None
     for sl in _chunks(len(ev)):
         last = check_event_chunk(

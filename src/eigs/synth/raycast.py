@@ -15,6 +15,7 @@ against the rays inside the screen rectangle that conservatively bounds its boun
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -49,24 +50,25 @@ Vec = tuple[np.ndarray, np.ndarray, np.ndarray]  # structure-of-arrays 3-vectors
 
 
 @dataclass
-class Primitive:
+class Primitive(ABC):
     """Base class: a solid placed by ``center`` (3,) and ``rot`` (3, 3) local-to-world rotation."""
 
     center: tuple[float, float, float]
     material: Material
     rot: np.ndarray = field(default_factory=lambda: np.eye(3))
 
+    @abstractmethod
     def intersect(self, o: np.ndarray, d: Vec) -> np.ndarray:
         """Ray parameter of the nearest hit ≥ ``_EPS_T`` per ray (+inf on a miss); ``o`` (3,) local origin shared
         by all rays, ``d`` local directions."""
-        raise NotImplementedError
 
+    @abstractmethod
     def surface(self, p: Vec) -> tuple[Vec, np.ndarray, np.ndarray]:
         """Local normal and texture coordinates (u, v) in repeats at local surface points ``p``."""
-        raise NotImplementedError
 
+    @abstractmethod
     def bound_radius(self) -> float:
-        raise NotImplementedError
+        """Radius of a sphere about ``center`` that contains the solid (world units)."""
 
 
 def _pick_t(t0: np.ndarray, t1: np.ndarray, ok: np.ndarray) -> np.ndarray:
