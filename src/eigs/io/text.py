@@ -5,7 +5,7 @@ A folder (or an event file inside one) holding any of:
 - ``events.txt`` (ECD) or ``v2e-dvs-events.txt`` (v2e): ``t x y p`` per line, t in float seconds, x column, y row,
   p ∈ {0 = OFF, 1 = ON} (−1/+1 also accepted); an optional 5th column (v2e signal/noise flag) is ignored; lines
   starting with ``#`` are comments (v2e writes 6 or 7 header lines).
-- ``images.txt``: ``t images/frame_XXXXXXXX.png`` (t in s, path relative to the folder). A folder with frames but
+- ``images.txt``: ``t images/frame_<8 digits>.png`` (t in s, path relative to the folder). A folder with frames but
   no event file is an RGB-only recording.
 - ``calib.txt``: ``fx fy cx cy k1 k2 p1 p2 k3`` (OpenCV convention, so cx, cy get +0.5).
 - ``groundtruth.txt`` (or ``--groundtruth``): ``t tx ty tz qx qy qz qw`` (T_world_cam, t in s).
