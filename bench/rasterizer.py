@@ -28,7 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _report import table, write_section  # noqa: E402
 
 from eigs.render import _backend, rasterize  # noqa: E402
-from eigs.render._wrapper import rasterize_cpu  # noqa: E402
+from eigs.render._wrapper import camera_list, rasterize_cpu  # noqa: E402
 from eigs.render.reference import render_reference  # noqa: E402
 
 
@@ -89,14 +89,15 @@ def time_kernels(args: tuple, repeats: int, isa: int = 0) -> tuple[float, float,
     with torch.no_grad():
         _, _, info = rasterize_cpu(*args, isa=isa)
     means, quats, scales, opac, colors, viewmat, K, W, H, bg = args
-    m2, con, dep, ext, radii = C.project_fwd(means, quats, scales, opac, viewmat, K, W, H)
+    m2, con, dep, ext, radii = C.project_fwd(means, quats, scales, opac, colors, camera_list(viewmat, K, means.dtype),
+                                             W, H)
     offs, ids = C.isect_tiles(m2, ext, dep, radii, W, H)
     v_image = torch.randn(H, W, 3, generator=torch.Generator().manual_seed(0))
     v_alpha = torch.randn(H, W, generator=torch.Generator().manual_seed(1))
     best_f = best_b = cpu_f = cpu_b = math.inf
     for r in range(repeats + 1):
         t0, c0 = time.perf_counter(), time.process_time()
-        image, trans, last = C.rasterize_fwd(m2, con, colors, opac, ext, bg, offs, ids, W, H, isa)
+        image, alpha, trans, last = C.rasterize_fwd(m2, con, colors, opac, ext, bg, offs, ids, W, H, isa)
         t1, c1 = time.perf_counter(), time.process_time()
         C.rasterize_bwd(m2, con, colors, opac, ext, bg, offs, ids, W, H, trans, last, v_image, v_alpha, isa)
         t2, c2 = time.perf_counter(), time.process_time()

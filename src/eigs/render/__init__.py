@@ -89,7 +89,8 @@ def rasterize(
         raise TypeError(f"background must be {dtype} on {device} like means")
     viewmat = viewmat.detach().to(device=device, dtype=dtype)
     K = K.detach().to(device=device, dtype=dtype)
-    # One host copy of the 25 camera numbers instead of a chain of small tensor ops (per-call latency).
+    # One host copy of the 25 camera numbers instead of a chain of small tensor ops (per-call latency); the
+    # cpu backend takes them as this list.
     cam = torch.cat((viewmat.reshape(-1), K.reshape(-1))).tolist()
     if not all(math.isfinite(v) for v in cam):
         raise ValueError("viewmat and K must be finite")
@@ -112,7 +113,7 @@ def rasterize(
 
     return rasterize_cpu(
         means.contiguous(), quats.contiguous(), scales.contiguous(), opacities.contiguous(), colors.contiguous(),
-        viewmat.contiguous(), K.contiguous(), width, height, background.contiguous(),
+        viewmat, K, width, height, background.contiguous(), cam=cam,
     )
 
 

@@ -19,8 +19,10 @@ def _isa() -> int:
 
 
 class _ProjectGaussians(torch.autograd.Function):
-    """means (N,3), quats (N,4), scales (N,3), opacities (N,) -> means2d (N,2), conics (N,3), depths (N,),
-    extents (N,2), radii (N,2) int32. Differentiable in means2d and conics; viewmat and K are constants."""
+    """means (N,3), quats (N,4), scales (N,3), opacities (N,), colors (N,D) -> means2d (N,2), conics (N,3),
+    depths (N,), extents (N,2), radii (N,2) int32. Differentiable in means2d and conics; opacities and colors
+    only take part in the culling (a non-finite colour culls its Gaussian); the camera ``cam`` (the 16 viewmat
+    and 9 K entries as floats) is a constant."""
 
     @staticmethod
     def forward(  # type: ignore[override]
@@ -29,38 +31,42 @@ class _ProjectGaussians(torch.autograd.Function):
         quats: Tensor,
         scales: Tensor,
         opacities: Tensor,
-        viewmat: Tensor,
-        K: Tensor,
+        colors: Tensor,
+        cam: list[float],
         width: int,
         height: int,
     ) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor]:
-        C = _backend.load()
-        means2d, conics, depths, extents, radii = C.project_fwd(
-            means, quats, scales, opacities, viewmat, K, width, height
+        means2d, conics, depths, extents, radii = _backend.load().project_fwd(
+            means, quats, scales, opacities, colors, cam, width, height
         )
-        ctx.save_for_backward(means, quats, scales, viewmat, K, radii)
-        ctx.width, ctx.height = width, height
+        ctx.save_for_backward(means, quats, scales, radii)
+        ctx.cam, ctx.width, ctx.height = cam, width, height
         ctx.mark_non_differentiable(depths, extents, radii)
         return means2d, conics, depths, extents, radii
 
     @staticmethod
     @once_differentiable
     def backward(ctx: FunctionCtx, v_means2d: Tensor, v_conics: Tensor, *_unused: Tensor):  # type: ignore[override]
-        means, quats, scales, viewmat, K, radii = ctx.saved_tensors
+        means, quats, scales, radii = ctx.saved_tensors
         v_means2d = torch.zeros_like(means[:, :2]) if v_means2d is None else v_means2d.contiguous()
         v_conics = torch.zeros_like(means) if v_conics is None else v_conics.contiguous()
         v_means, v_quats, v_scales = _backend.load().project_bwd(
-            means, quats, scales, viewmat, K, ctx.width, ctx.height, radii, v_means2d, v_conics
+            means, quats, scales, ctx.cam, ctx.width, ctx.height, radii, v_means2d, v_conics
         )
         return v_means, v_quats, v_scales, None, None, None, None, None
 
 
+def camera_list(viewmat: Tensor, K: Tensor, dtype: torch.dtype) -> list[float]:
+    """The 16 entries of viewmat then the 9 of K (row-major), rounded to ``dtype``, as Python floats."""
+    return torch.cat((viewmat.detach().reshape(-1), K.detach().reshape(-1))).to(dtype).tolist()
+
+
 def project(
-    means: Tensor, quats: Tensor, scales: Tensor, opacities: Tensor, viewmat: Tensor, K: Tensor, width: int,
+    means: Tensor, quats: Tensor, scales: Tensor, opacities: Tensor, colors: Tensor, cam: list[float], width: int,
     height: int,
 ) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor]:
     """Project N Gaussians (see :class:`_ProjectGaussians`). All inputs contiguous, one float dtype."""
-    return _ProjectGaussians.apply(means, quats, scales, opacities, viewmat, K, width, height)
+    return _ProjectGaussians.apply(means, quats, scales, opacities, colors, cam, width, height)
 
 
 @torch.no_grad()
@@ -94,7 +100,7 @@ class _RasterizeToPixels(torch.autograd.Function):
         height: int,
         isa: int,
     ) -> tuple[Tensor, Tensor]:
-        image, trans, last = _backend.load().rasterize_fwd(
+        image, alpha, trans, last = _backend.load().rasterize_fwd(
             means2d, conics, colors, opacities, extents, background, tile_offsets, flatten_ids, width, height,
             isa,
         )
@@ -102,7 +108,7 @@ class _RasterizeToPixels(torch.autograd.Function):
             means2d, conics, colors, opacities, background, extents, tile_offsets, flatten_ids, trans, last
         )
         ctx.width, ctx.height, ctx.isa = width, height, isa
-        return image, 1 - trans
+        return image, alpha
 
     @staticmethod
     @once_differentiable
@@ -113,11 +119,10 @@ class _RasterizeToPixels(torch.autograd.Function):
         D = colors.shape[1]
         v_image = means2d.new_zeros(H, W, D) if v_image is None else v_image.contiguous()
         v_alpha = means2d.new_zeros(H, W) if v_alpha is None else v_alpha.contiguous()
-        v_means2d, v_conics, v_opacities, v_colors = _backend.load().rasterize_bwd(
+        v_means2d, v_conics, v_opacities, v_colors, v_background = _backend.load().rasterize_bwd(
             means2d, conics, colors, opacities, extents, background, tile_offsets, flatten_ids, W, H, trans,
             last, v_image, v_alpha, ctx.isa,
         )
-        v_background = (v_image * trans[..., None]).sum((0, 1))
         return v_means2d, v_conics, v_colors, v_opacities, v_background, None, None, None, None, None, None
 
 
@@ -134,15 +139,20 @@ def rasterize_to_pixels(
 
 def rasterize_cpu(
     means: Tensor, quats: Tensor, scales: Tensor, opacities: Tensor, colors: Tensor, viewmat: Tensor, K: Tensor,
-    width: int, height: int, background: Tensor, isa: int | None = None,
+    width: int, height: int, background: Tensor, isa: int | None = None, cam: list[float] | None = None,
 ) -> tuple[Tensor, Tensor, dict]:
-    """The full CPU pipeline on validated, contiguous inputs of one float dtype (see eigs.render.rasterize)."""
-    # A non-finite colour culls its Gaussian (the kernel never reads culled colours).
-    opac = torch.where(torch.isfinite(colors).all(-1), opacities, torch.zeros_like(opacities))
-    means2d, conics, depths, extents, radii = project(means, quats, scales, opac, viewmat, K, width, height)
+    """The full CPU pipeline on validated, contiguous inputs of one float dtype (see eigs.render.rasterize).
+
+    ``cam`` is :func:`camera_list` of viewmat and K when the caller has it already. Few tensor ops per call:
+    the colour culling, alpha = 1 - T and the background gradient live in the C++ kernels.
+    """
+    if cam is None:
+        cam = camera_list(viewmat, K, means.dtype)
+    # A non-finite colour culls its Gaussian in the projection (the kernels never read culled colours).
+    means2d, conics, depths, extents, radii = project(means, quats, scales, opacities, colors, cam, width, height)
     tile_offsets, flatten_ids = isect_tiles(means2d, extents, depths, radii, width, height)
     image, alpha = rasterize_to_pixels(
-        means2d, conics, colors, opac, background, extents, tile_offsets, flatten_ids, width, height, isa
+        means2d, conics, colors, opacities, background, extents, tile_offsets, flatten_ids, width, height, isa
     )
     info = {
         "backend": "cpu",

@@ -6,6 +6,7 @@
 
 #include <string>
 #include <tuple>
+#include <vector>
 
 #include "kernels.h"
 
@@ -19,19 +20,22 @@ void check(const Tensor& t, const char* name, at::ScalarType dtype) {
     TORCH_CHECK(t.is_contiguous(), name, " must be contiguous");
 }
 
+// cam: the 16 entries of viewmat (row-major 4x4, world-to-camera) then the 9 of K (row-major 3x3), already
+// rounded to the tensors' dtype by the caller (a Python list: no small tensor ops per call).
 template <typename S>
-eigs::Camera<S> make_camera(const Tensor& viewmat, const Tensor& K, int64_t width, int64_t height) {
+eigs::Camera<S> make_camera(const std::vector<double>& cam_in, int64_t width, int64_t height) {
+    TORCH_CHECK(cam_in.size() == 25, "cam must hold the 16 viewmat and 9 K entries, got ", cam_in.size());
+    const double* V = cam_in.data();
+    const double* k = cam_in.data() + 16;
     eigs::Camera<S> cam;
-    const auto V = viewmat.accessor<S, 2>();
-    const auto k = K.accessor<S, 2>();
     for (int i = 0; i < 3; ++i) {
-        for (int j = 0; j < 3; ++j) cam.R[i * 3 + j] = V[i][j];
-        cam.t[i] = V[i][3];
+        for (int j = 0; j < 3; ++j) cam.R[i * 3 + j] = S(V[i * 4 + j]);
+        cam.t[i] = S(V[i * 4 + 3]);
     }
-    cam.fx = k[0][0];
-    cam.fy = k[1][1];
-    cam.cx = k[0][2];
-    cam.cy = k[1][2];
+    cam.fx = S(k[0]);
+    cam.fy = S(k[4]);
+    cam.cx = S(k[2]);
+    cam.cy = S(k[5]);
     cam.width = width;
     cam.height = height;
     return cam;
@@ -44,14 +48,19 @@ int threads(int64_t work, int64_t grain) {
     return int(std::max<int64_t>(1, std::min<int64_t>(at::get_num_threads(), by_work)));
 }
 
+// Gaussians per thread below which projection (and its backward) and binning run on fewer threads.
+constexpr int64_t kProjectGrain = 256;
+constexpr int64_t kIsectGrain = 512;
+
 int64_t n_tiles_of(int64_t width, int64_t height) { return ((width + 15) / 16) * ((height + 15) / 16); }
 
 std::tuple<Tensor, Tensor, Tensor, Tensor, Tensor> project_fwd(Tensor means, Tensor quats, Tensor scales,
-                                                                Tensor opacities, Tensor viewmat, Tensor K,
-                                                                int64_t width, int64_t height) {
+                                                                Tensor opacities, Tensor colors,
+                                                                std::vector<double> cam_in, int64_t width,
+                                                                int64_t height) {
     const auto dt = means.scalar_type();
     for (auto& [t, name] : {std::pair<Tensor&, const char*>{means, "means"}, {quats, "quats"},
-                            {scales, "scales"}, {opacities, "opacities"}, {viewmat, "viewmat"}, {K, "K"}})
+                            {scales, "scales"}, {opacities, "opacities"}, {colors, "colors"}})
         check(t, name, dt);
     const int64_t n = means.size(0);
     auto opt = means.options();
@@ -59,35 +68,35 @@ std::tuple<Tensor, Tensor, Tensor, Tensor, Tensor> project_fwd(Tensor means, Ten
     Tensor depths = torch::empty({n}, opt), extents = torch::empty({n, 2}, opt);
     Tensor radii = torch::empty({n, 2}, opt.dtype(torch::kInt32));
     AT_DISPATCH_FLOATING_TYPES(dt, "project_fwd", [&] {
-        const auto cam = make_camera<scalar_t>(viewmat, K, width, height);
+        const auto cam = make_camera<scalar_t>(cam_in, width, height);
         eigs::project_forward<scalar_t>(n, means.data_ptr<scalar_t>(), quats.data_ptr<scalar_t>(),
-                                        scales.data_ptr<scalar_t>(), opacities.data_ptr<scalar_t>(), cam,
+                                        scales.data_ptr<scalar_t>(), opacities.data_ptr<scalar_t>(),
+                                        colors.data_ptr<scalar_t>(), colors.size(1), cam,
                                         means2d.data_ptr<scalar_t>(), conics.data_ptr<scalar_t>(),
                                         depths.data_ptr<scalar_t>(), extents.data_ptr<scalar_t>(),
-                                        radii.data_ptr<int32_t>(), threads(n, 512));
+                                        radii.data_ptr<int32_t>(), threads(n, kProjectGrain));
     });
     return {means2d, conics, depths, extents, radii};
 }
 
-std::tuple<Tensor, Tensor, Tensor> project_bwd(Tensor means, Tensor quats, Tensor scales, Tensor viewmat,
-                                               Tensor K, int64_t width, int64_t height, Tensor radii,
-                                               Tensor v_means2d, Tensor v_conics) {
+std::tuple<Tensor, Tensor, Tensor> project_bwd(Tensor means, Tensor quats, Tensor scales,
+                                               std::vector<double> cam_in, int64_t width, int64_t height,
+                                               Tensor radii, Tensor v_means2d, Tensor v_conics) {
     const auto dt = means.scalar_type();
     for (auto& [t, name] : {std::pair<Tensor&, const char*>{means, "means"}, {quats, "quats"},
-                            {scales, "scales"}, {viewmat, "viewmat"}, {K, "K"}, {v_means2d, "v_means2d"},
-                            {v_conics, "v_conics"}})
+                            {scales, "scales"}, {v_means2d, "v_means2d"}, {v_conics, "v_conics"}})
         check(t, name, dt);
     check(radii, "radii", torch::kInt32);
     const int64_t n = means.size(0);
     Tensor v_means = torch::empty({n, 3}, means.options()), v_quats = torch::empty({n, 4}, means.options());
     Tensor v_scales = torch::empty({n, 3}, means.options());
     AT_DISPATCH_FLOATING_TYPES(dt, "project_bwd", [&] {
-        const auto cam = make_camera<scalar_t>(viewmat, K, width, height);
+        const auto cam = make_camera<scalar_t>(cam_in, width, height);
         eigs::project_backward<scalar_t>(n, means.data_ptr<scalar_t>(), quats.data_ptr<scalar_t>(),
                                          scales.data_ptr<scalar_t>(), cam, radii.data_ptr<int32_t>(),
                                          v_means2d.data_ptr<scalar_t>(), v_conics.data_ptr<scalar_t>(),
                                          v_means.data_ptr<scalar_t>(), v_quats.data_ptr<scalar_t>(),
-                                         v_scales.data_ptr<scalar_t>(), threads(n, 512));
+                                         v_scales.data_ptr<scalar_t>(), threads(n, kProjectGrain));
     });
     return {v_means, v_quats, v_scales};
 }
@@ -107,14 +116,14 @@ std::tuple<Tensor, Tensor> isect_tiles(Tensor means2d, Tensor extents, Tensor de
     AT_DISPATCH_FLOATING_TYPES(dt, "isect_tiles", [&] {
         total = eigs::isect_plan<scalar_t>(n, means2d.data_ptr<scalar_t>(), extents.data_ptr<scalar_t>(),
                                            depths.data_ptr<scalar_t>(), radii.data_ptr<int32_t>(), width, height,
-                                           offsets.data_ptr<int64_t>(), plan, threads(n, 1024));
+                                           offsets.data_ptr<int64_t>(), plan, threads(n, kIsectGrain));
     });
     Tensor ids = torch::empty({total}, means2d.options().dtype(torch::kInt64));
     eigs::isect_fill(plan, ids.data_ptr<int64_t>());
     return {offsets, ids};
 }
 
-std::tuple<Tensor, Tensor, Tensor> rasterize_fwd(Tensor means2d, Tensor conics, Tensor colors,
+std::tuple<Tensor, Tensor, Tensor, Tensor> rasterize_fwd(Tensor means2d, Tensor conics, Tensor colors,
                                                  Tensor opacities, Tensor extents, Tensor background,
                                                  Tensor tile_offsets, Tensor flatten_ids, int64_t width,
                                                  int64_t height, int64_t isa) {
@@ -127,21 +136,23 @@ std::tuple<Tensor, Tensor, Tensor> rasterize_fwd(Tensor means2d, Tensor conics, 
     check(flatten_ids, "flatten_ids", torch::kInt64);
     const int64_t d = colors.size(1);
     auto opt = means2d.options();
-    Tensor image = torch::empty({height, width, d}, opt), trans = torch::empty({height, width}, opt);
+    Tensor image = torch::empty({height, width, d}, opt), alpha = torch::empty({height, width}, opt);
+    Tensor trans = torch::empty({height, width}, opt);
     Tensor last = torch::empty({height, width}, opt.dtype(torch::kInt32));
     AT_DISPATCH_FLOATING_TYPES(dt, "rasterize_fwd", [&] {
         eigs::rasterize_forward<scalar_t>(
             means2d.data_ptr<scalar_t>(), conics.data_ptr<scalar_t>(), colors.data_ptr<scalar_t>(),
             opacities.data_ptr<scalar_t>(), extents.data_ptr<scalar_t>(), background.data_ptr<scalar_t>(), d,
             width, height, tile_offsets.data_ptr<int64_t>(), flatten_ids.data_ptr<int64_t>(),
-            image.data_ptr<scalar_t>(), trans.data_ptr<scalar_t>(), last.data_ptr<int32_t>(),
+            image.data_ptr<scalar_t>(), alpha.data_ptr<scalar_t>(), trans.data_ptr<scalar_t>(),
+            last.data_ptr<int32_t>(),
             threads(std::min(n_tiles_of(width, height), flatten_ids.size(0) / 16 + 1), 1),
             int(isa));
     });
-    return {image, trans, last};
+    return {image, alpha, trans, last};
 }
 
-std::tuple<Tensor, Tensor, Tensor, Tensor> rasterize_bwd(Tensor means2d, Tensor conics, Tensor colors,
+std::tuple<Tensor, Tensor, Tensor, Tensor, Tensor> rasterize_bwd(Tensor means2d, Tensor conics, Tensor colors,
                                                          Tensor opacities, Tensor extents, Tensor background,
                                                          Tensor tile_offsets, Tensor flatten_ids, int64_t width,
                                                          int64_t height, Tensor trans, Tensor last,
@@ -161,6 +172,7 @@ std::tuple<Tensor, Tensor, Tensor, Tensor> rasterize_bwd(Tensor means2d, Tensor 
     Tensor pair_grads = torch::empty({n_isects, 6 + d}, opt);
     Tensor v_means2d = torch::zeros({n, 2}, opt), v_conics = torch::zeros({n, 3}, opt);
     Tensor v_opacities = torch::zeros({n}, opt), v_colors = torch::zeros({n, d}, opt);
+    Tensor v_background = torch::empty({d}, opt);
     AT_DISPATCH_FLOATING_TYPES(dt, "rasterize_bwd", [&] {
         eigs::rasterize_backward<scalar_t>(
             n, means2d.data_ptr<scalar_t>(), conics.data_ptr<scalar_t>(), colors.data_ptr<scalar_t>(),
@@ -169,9 +181,9 @@ std::tuple<Tensor, Tensor, Tensor, Tensor> rasterize_bwd(Tensor means2d, Tensor 
             trans.data_ptr<scalar_t>(), last.data_ptr<int32_t>(), v_image.data_ptr<scalar_t>(),
             v_alpha.data_ptr<scalar_t>(), pair_grads.data_ptr<scalar_t>(), v_means2d.data_ptr<scalar_t>(),
             v_conics.data_ptr<scalar_t>(), v_opacities.data_ptr<scalar_t>(), v_colors.data_ptr<scalar_t>(),
-            threads(std::min(n_tiles_of(width, height), n_isects / 16 + 1), 1), int(isa));
+            v_background.data_ptr<scalar_t>(), threads(std::min(n_tiles_of(width, height), n_isects / 16 + 1), 1), int(isa));
     });
-    return {v_means2d, v_conics, v_opacities, v_colors};
+    return {v_means2d, v_conics, v_opacities, v_colors, v_background};
 }
 
 }  // namespace

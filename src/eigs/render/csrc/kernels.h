@@ -17,13 +17,14 @@ struct Camera {
 };
 
 // Projection of N Gaussians.  Outputs for culled Gaussians: radii = 0, extents = 0, other outputs 0.
-//   means (N,3), quats (N,4) wxyz, scales (N,3), opacities (N)
+//   means (N,3), quats (N,4) wxyz, scales (N,3), opacities (N), colors (N,D) (only checked: a Gaussian with a
+//   non-finite colour is culled)
 //   -> means2d (N,2) px, conics (N,3), depths (N), extents (N,2) px (float half-widths of the conservative box),
 //      radii (N,2) int32 (ceil of extents, 0 when culled or off-image)
 template <typename S>
 void project_forward(int64_t n, const S* means, const S* quats, const S* scales, const S* opacities,
-                     const Camera<S>& cam, S* means2d, S* conics, S* depths, S* extents, int32_t* radii,
-                     int nthreads);
+                     const S* colors, int64_t d, const Camera<S>& cam, S* means2d, S* conics, S* depths,
+                     S* extents, int32_t* radii, int nthreads);
 
 // VJP of the projection for Gaussians with radii > 0.
 //   v_means2d (N,2), v_conics (N,3) -> v_means (N,3), v_quats (N,4), v_scales (N,3) (overwritten)
@@ -53,25 +54,27 @@ int64_t isect_plan(int64_t n, const S* means2d, const S* extents, const S* depth
 
 void isect_fill(IsectPlan& plan, int64_t* flatten_ids);
 
-// Forward compositing.  colors (N,D), background (D) -> image (H,W,D) = C + T bg, trans (H,W) = final T,
-// last (H,W) int32 = position (within its tile's list) of the last contributing Gaussian, -1 if none.
+// Forward compositing.  colors (N,D), background (D) -> image (H,W,D) = C + T bg, alpha (H,W) = 1 - T,
+// trans (H,W) = final T, last (H,W) int32 = position (within its tile's list) of the last contributing Gaussian, -1 if none.
 // isa: 0 = best available, 1 = baseline (SSE2), 2 = AVX2, 3 = AVX-512.
 template <typename S>
 void rasterize_forward(const S* means2d, const S* conics, const S* colors, const S* opacities,
                        const S* extents, const S* background, int64_t d, int64_t width, int64_t height,
-                       const int64_t* tile_offsets, const int64_t* flatten_ids, S* image, S* trans,
+                       const int64_t* tile_offsets, const int64_t* flatten_ids, S* image, S* alpha, S* trans,
                        int32_t* last, int nthreads, int isa);
 
 // Backward compositing.  v_image (H,W,D), v_alpha (H,W) -> per-pair gradients pair_grads (n_isects, 6 + D)
 // in the order (v_mean2d x, y, v_conic a, b, c, v_opacity, v_color...), then reduced in isect order (a fixed
 // order: deterministic for any thread count) into v_means2d (N,2), v_conics (N,3), v_opacities (N),
-// v_colors (N,D), which must be zero on entry.
+// v_colors (N,D), which must be zero on entry; v_background (D) = sum over pixels of T_final v_image, summed
+// per tile (row-major pixels) and then over tiles in tile order (deterministic too).
 template <typename S>
 void rasterize_backward(int64_t n, const S* means2d, const S* conics, const S* colors, const S* opacities,
                         const S* extents, const S* background, int64_t d, int64_t width, int64_t height,
                         const int64_t* tile_offsets, const int64_t* flatten_ids, const S* trans,
                         const int32_t* last, const S* v_image, const S* v_alpha, S* pair_grads,
-                        S* v_means2d, S* v_conics, S* v_opacities, S* v_colors, int nthreads, int isa);
+                        S* v_means2d, S* v_conics, S* v_opacities, S* v_colors, S* v_background, int nthreads,
+                        int isa);
 
 // ISA support of this CPU: bit 0 AVX2, bit 1 AVX-512 (F, VL, BW, DQ).
 int cpu_isa_flags();

@@ -165,12 +165,14 @@ inline void pixel_range(double c, double r, int64_t size, int64_t& lo, int64_t& 
 
 template <typename S>
 void project_forward(int64_t n, const S* means, const S* quats, const S* scales, const S* opacities,
-                     const Camera<S>& cam, S* means2d, S* conics, S* depths, S* extents, int32_t* radii,
-                     int nthreads) {
+                     const S* colors, int64_t d, const Camera<S>& cam, S* means2d, S* conics, S* depths,
+                     S* extents, int32_t* radii, int nthreads) {
 #pragma omp parallel for num_threads(nthreads) schedule(static)
     for (int64_t g = 0; g < n; ++g) {
         Proj<S> p;
-        bool keep = project_one(means + 3 * g, quats + 4 * g, scales + 3 * g, opacities[g], cam, p);
+        bool keep = true;
+        for (int64_t ch = 0; ch < d; ++ch) keep &= finite(colors[g * d + ch]);  // a non-finite colour culls
+        keep = keep && project_one(means + 3 * g, quats + 4 * g, scales + 3 * g, opacities[g], cam, p);
         double ex = 0, ey = 0;
         if (keep) {
             // Opacity-aware box: o exp(-sigma) >= 1/255  <=>  sigma <= L = ln(255 o), and on the ellipse
@@ -439,8 +441,8 @@ void isect_fill(IsectPlan& plan, int64_t* flatten_ids) {
 }
 
 #define EIGS_INSTANTIATE_PROJ(S)                                                                              \
-    template void project_forward<S>(int64_t, const S*, const S*, const S*, const S*, const Camera<S>&, S*,   \
-                                     S*, S*, S*, int32_t*, int);                                              \
+    template void project_forward<S>(int64_t, const S*, const S*, const S*, const S*, const S*, int64_t,      \
+                                     const Camera<S>&, S*, S*, S*, S*, int32_t*, int);                        \
     template void project_backward<S>(int64_t, const S*, const S*, const S*, const Camera<S>&, const int32_t*, \
                                       const S*, const S*, S*, S*, S*, int);                                   \
     template int64_t isect_plan<S>(int64_t, const S*, const S*, const S*, const int32_t*, int64_t, int64_t,  \

@@ -23,7 +23,7 @@ struct BwdCtx {
     const S* trans;
     const int32_t* last;
     const S *v_image, *v_alpha;
-    S* pair_grads;
+    S *pair_grads, *tile_bg;  // tile_bg (n_tiles, D): per tile, sum over its pixels of T_final v_image
 };
 
 template <typename S>
@@ -60,6 +60,8 @@ EIGS_INLINE void bwd_tile(const BwdCtx<S>& A, int64_t tile, BwdScratch<S>& ws) {
     int32_t row_max_last[kTile];
     int32_t tile_max_last = -1;
     std::fill(Sb, Sb + D * kTilePix, S(0));
+    S* __restrict__ bg_sum = A.tile_bg + tile * D;
+    std::fill(bg_sum, bg_sum + D, S(0));
     for (int r = 0; r < kTile; ++r) {
         row_max_last[r] = -1;
         for (int l = 0; l < kTile; ++l) {
@@ -72,6 +74,7 @@ EIGS_INLINE void bwd_tile(const BwdCtx<S>& A, int64_t tile, BwdScratch<S>& ws) {
                     const S gv = A.v_image[pix * D + ch];
                     G[ch * kTilePix + q] = gv;
                     bgdot += A.background[ch] * gv;
+                    bg_sum[ch] += tf * gv;
                 }
                 T[q] = tf;
                 Q[q] = tf * (bgdot - A.v_alpha[pix]);
@@ -209,11 +212,14 @@ void rasterize_backward(int64_t n, const S* means2d, const S* conics, const S* c
                         const S* extents, const S* background, int64_t d, int64_t width, int64_t height,
                         const int64_t* tile_offsets, const int64_t* flatten_ids, const S* trans,
                         const int32_t* last, const S* v_image, const S* v_alpha, S* pair_grads,
-                        S* v_means2d, S* v_conics, S* v_opacities, S* v_colors, int nthreads, int isa) {
-    const BwdCtx<S> A{means2d, conics,       colors,      opacities, extents, background, d,       width,
-                      height,  tile_offsets, flatten_ids, trans,     last,    v_image,    v_alpha, pair_grads};
-    const BwdFn<S> fn = pick_bwd(means2d, d, resolve_isa(isa));
+                        S* v_means2d, S* v_conics, S* v_opacities, S* v_colors, S* v_background, int nthreads,
+                        int isa) {
     const int64_t n_tiles = ((width + kTile - 1) / kTile) * ((height + kTile - 1) / kTile);
+    std::vector<S> tile_bg(size_t(n_tiles * d));
+    const BwdCtx<S> A{means2d,     conics, colors,  opacities, extents,    background, d,
+                      width,       height, tile_offsets, flatten_ids, trans, last, v_image,
+                      v_alpha,     pair_grads, tile_bg.data()};
+    const BwdFn<S> fn = pick_bwd(means2d, d, resolve_isa(isa));
     const std::vector<int64_t> order = tile_schedule(tile_offsets, n_tiles, nthreads);
     const int64_t n_isects = tile_offsets[n_tiles];
     const int64_t P = 6 + d;
@@ -242,16 +248,19 @@ void rasterize_backward(int64_t n, const S* means2d, const S* conics, const S* c
             for (int64_t ch = 0; ch < d; ++ch) v_colors[g * d + ch] += pg[6 + ch];
         }
     }
+    for (int64_t ch = 0; ch < d; ++ch) v_background[ch] = S(0);
+    for (int64_t t = 0; t < n_tiles; ++t)
+        for (int64_t ch = 0; ch < d; ++ch) v_background[ch] += tile_bg[size_t(t * d + ch)];
 }
 
 template void rasterize_backward<float>(int64_t, const float*, const float*, const float*, const float*,
                                         const float*, const float*, int64_t, int64_t, int64_t, const int64_t*,
                                         const int64_t*, const float*, const int32_t*, const float*, const float*,
-                                        float*, float*, float*, float*, float*, int, int);
+                                        float*, float*, float*, float*, float*, float*, int, int);
 template void rasterize_backward<double>(int64_t, const double*, const double*, const double*, const double*,
                                          const double*, const double*, int64_t, int64_t, int64_t,
                                          const int64_t*, const int64_t*, const double*, const int32_t*,
                                          const double*, const double*, double*, double*, double*, double*,
-                                         double*, int, int);
+                                         double*, double*, int, int);
 
 }  // namespace eigs

@@ -16,7 +16,7 @@ struct FwdCtx {
     const S *means2d, *conics, *colors, *opacities, *extents, *background;
     int64_t d, width, height;
     const int64_t *tile_offsets, *flatten_ids;
-    S *image, *trans;
+    S *image, *alpha, *trans;
     int32_t* last;
 };
 
@@ -107,6 +107,7 @@ EIGS_INLINE void fwd_tile(const FwdCtx<S>& A, int64_t tile, FwdScratch<S>& ws) {
             const int q = r * kTile + l;
             for (int64_t ch = 0; ch < D; ++ch)
                 A.image[pix * D + ch] = C[ch * kTilePix + q] + T[q] * A.background[ch];
+            A.alpha[pix] = S(1) - T[q];
             A.trans[pix] = T[q];
             A.last[pix] = last[q];
         }
@@ -164,10 +165,10 @@ int resolve_isa(int requested) {
 template <typename S>
 void rasterize_forward(const S* means2d, const S* conics, const S* colors, const S* opacities,
                        const S* extents, const S* background, int64_t d, int64_t width, int64_t height,
-                       const int64_t* tile_offsets, const int64_t* flatten_ids, S* image, S* trans,
+                       const int64_t* tile_offsets, const int64_t* flatten_ids, S* image, S* alpha, S* trans,
                        int32_t* last, int nthreads, int isa) {
-    const FwdCtx<S> A{means2d, conics,       colors,      opacities, extents, background, d,   width,
-                      height,  tile_offsets, flatten_ids, image,     trans,   last};
+    const FwdCtx<S> A{means2d, conics,      colors, opacities, extents, background, d,   width, height,
+                      tile_offsets, flatten_ids, image, alpha,     trans,   last};
     const FwdFn<S> fn = pick_fwd(means2d, d, resolve_isa(isa));
     const int64_t n_tiles = ((width + kTile - 1) / kTile) * ((height + kTile - 1) / kTile);
     const std::vector<int64_t> order = tile_schedule(tile_offsets, n_tiles, nthreads);
@@ -181,9 +182,10 @@ void rasterize_forward(const S* means2d, const S* conics, const S* colors, const
 
 template void rasterize_forward<float>(const float*, const float*, const float*, const float*, const float*,
                                        const float*, int64_t, int64_t, int64_t, const int64_t*, const int64_t*,
-                                       float*, float*, int32_t*, int, int);
+                                       float*, float*, float*, int32_t*, int, int);
 template void rasterize_forward<double>(const double*, const double*, const double*, const double*,
                                         const double*, const double*, int64_t, int64_t, int64_t,
-                                        const int64_t*, const int64_t*, double*, double*, int32_t*, int, int);
+                                        const int64_t*, const int64_t*, double*, double*, double*, int32_t*, int,
+                                        int);
 
 }  // namespace eigs
