@@ -195,3 +195,49 @@ def test_textures_are_bundled_and_linear():
     x = np.linspace(0, 1, 101)
     assert np.allclose(linear_to_srgb(srgb_to_linear(x)), x, atol=1e-12)
     assert srgb_to_linear(np.array([0.5]))[0] == pytest.approx(0.21404, abs=1e-4)
+
+
+def test_texture_crop_is_a_window_of_the_photograph():
+    # camera is 512×512: the window (0.5, 0.25, 0.25) is rows 128–255, columns 256–383 of the photograph
+    import skimage.data
+    from skimage.transform import resize
+
+    from eigs.synth.textures import load_texture, srgb_to_linear
+
+    raw = skimage.data.camera().astype(np.float64) / 255.0
+    ref = srgb_to_linear(resize(raw[128:256, 256:384], (32, 32), order=1, anti_aliasing=True, mode="reflect"))
+    got = load_texture("camera", 32, (0.5, 0.25, 0.25))
+    assert np.abs(got[:, :, 0] - ref).max() < 1e-6
+    assert not np.allclose(got, load_texture("camera", 32, (0.0, 0.0, 0.25)))
+    for bad in [(0.0, 0.0, 0.0), (0.8, 0.0, 0.5), (0.0, -0.1, 0.5)]:
+        with pytest.raises(EigsError, match="crop"):
+            load_texture("camera", 32, bad)
+
+
+def test_texture_offset_shifts_the_lookup():
+    from eigs.synth.raycast import Box, Material, RayCaster
+
+    def render(offset):
+        box = Box((0.0, 0.0, 0.0), Material("astronaut", tile=4.0, offset=offset), half=(1.0, 1.0, 0.05))
+        c2w = np.eye(4)
+        c2w[:3, :3] = np.diag([1.0, -1.0, -1.0])  # looking down at the top face
+        c2w[:3, 3] = (0.0, 0.0, 3.0)
+        K = np.array([[40.0, 0, 16], [0, 40.0, 16], [0, 0, 1]])
+        return RayCaster([box]).render(c2w, K, 32, 32, supersample=1).rgb[0]
+
+    a, b = render((0.0, 0.0)), render((0.25, 0.0))
+    assert not np.allclose(a, b)
+    # a shift by one whole mirrored period (2 repeats) changes nothing
+    assert np.allclose(a, render((2.0, 0.0)), atol=1e-5)
+
+
+def test_room_shows_each_photograph_window_once():
+    from eigs.synth.scenes import SCENES, _environment
+
+    room = _environment(-1.0, 3)
+    keys = [(p.material.texture, p.material.crop) for p in room]
+    assert len(room) == 36 + 8 and len(set(keys)) == len(keys)
+    # every benchmark scene stands in a room; toy does not
+    for name, spec in SCENES.items():
+        n_room = sum(1 for p in spec.build() if p.material.crop[2] == 0.5 and p.material.offset != (0.0, 0.0))
+        assert n_room == (0 if name == "toy" else 44), name

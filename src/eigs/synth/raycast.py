@@ -39,11 +39,16 @@ def rotation(axis: tuple[float, float, float] | np.ndarray, angle_deg: float) ->
 
 @dataclass
 class Material:
-    """Surface appearance: a texture (linear albedo) times ``tint``; ``tile``: world units per texture repeat."""
+    """Surface appearance: a texture (linear albedo) times ``tint``; ``tile``: world units per texture repeat;
+    ``crop``: the window (x0, y0, side) of the photograph used, as fractions of its centred square (so primitives
+    can show different parts of one photograph); ``offset``: added to the texture coordinates (u, v), in repeats
+    (places a face's visible window inside one period, away from the mirror seams)."""
 
     texture: str
     tint: tuple[float, float, float] = (1.0, 1.0, 1.0)
     tile: float = 1.0
+    crop: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    offset: tuple[float, float] = (0.0, 0.0)
 
 
 Vec = tuple[np.ndarray, np.ndarray, np.ndarray]  # structure-of-arrays 3-vectors, each (M,) float32
@@ -259,7 +264,7 @@ class RayCaster:
         self._tex_size = int(texture_size)
         self._tex = []
         for p in self.primitives:
-            albedo = albedo_floor + (1 - albedo_floor) * load_texture(p.material.texture, texture_size)
+            albedo = albedo_floor + (1 - albedo_floor) * load_texture(p.material.texture, texture_size, p.material.crop)
             self._tex.append(mirror_tile((albedo * np.asarray(p.material.tint, F32)).astype(F32)))
         self._rot = [np.asarray(p.rot, dtype=np.float64) for p in self.primitives]
         self._ctr = [np.asarray(p.center, dtype=np.float64) for p in self.primitives]
@@ -366,6 +371,9 @@ class RayCaster:
             for ldir, gain in self._lights:
                 ll = (self._rot[k].T @ ldir).astype(F32)  # light direction in the local frame
                 shade_k += F32(gain) * np.maximum(n[0] * ll[0] + n[1] * ll[1] + n[2] * ll[2], 0.0)
+            du, dv = prim.material.offset
+            if du or dv:
+                u, v = u + F32(du), v + F32(dv)
             col = sample_texture(self._tex[k], self._tex_size, u, v) * shade_k[:, None]
             out[:, r0:r1, c0:c1][mask] = col
         np.clip(out, 0.0, 1.0, out=out)

@@ -26,7 +26,7 @@ DEFAULTS: dict[str, Any] = {
     # image and views
     "width": 128,
     "height": 96,
-    "fov_deg": 40.0,  # horizontal field of view
+    "fov_deg": 60.0,  # horizontal field of view (narrower views leave SfM a rotation/translation ambiguity)
     "n_train": 24,
     "n_novel": 12,
     # time base (µs)
@@ -38,13 +38,13 @@ DEFAULTS: dict[str, Any] = {
     "lead_subframes": 2,
     "n_bins": 4,  # B: latent poses at B + 1 times per exposure
     # orbit (scene units, degrees)
-    "orbit_radius": 4.0,
+    "orbit_radius": 3.2,
     "elevation_min": 15.0,
     "elevation_max": 45.0,
     # shake
     "shake": 1.0,  # strength multiplier (0 = no shake)
-    "shake_rot_deg": 1.0,  # RMS rotation per pitch/yaw axis at strength 1 (roll: half)
-    "shake_trans": 0.02,  # RMS translation per axis at strength 1 (scene units)
+    "shake_rot_deg": 1.6,  # RMS rotation per pitch/yaw axis at strength 1 (roll: half)
+    "shake_trans": 0.025,  # RMS translation per axis at strength 1 (scene units)
     "shake_fmin_hz": 2.0,
     "shake_fmax_hz": 12.0,
     # renderer
@@ -93,6 +93,43 @@ def _ground(size: float, z: float, material: Material, thickness: float = 0.1) -
     return Box((0.0, 0.0, z - thickness), material, half=(size, size, thickness))
 
 
+# Photographs that are not periodic (bricks, grass blades and text lines repeat; a colour wheel has no corners).
+_ENV_PHOTOS = ("astronaut", "camera", "chelsea", "coffee", "coins", "hubble", "ihc", "moon", "retina", "rocket",
+               "gravel")  # fmt: skip
+
+
+def _environment(z: float, seed: int, half: float = 7.5, n: int = 6, wall_height: float = 5.0) -> list[Primitive]:
+    """A room around the scene: an n × n patchwork floor (top at height ``z``, ±``half``) and 8 walls on the
+    octagon of inradius ``half``. Every patch and wall shows a different window of a different photograph (no
+    texture repeats anywhere, no mirror seams), with its own tint, so any two places in the room look different:
+    SfM gets correspondences at all depths around the object, and no ambiguous ones."""
+    rng = np.random.default_rng(seed)  # fixed layout per scene, independent of the user's seed
+    windows = [(name, (x0, y0, 0.5)) for name in _ENV_PHOTOS for x0 in (0.0, 0.5) for y0 in (0.0, 0.5)]
+    order = rng.permutation(len(windows))
+    prims: list[Primitive] = []
+
+    def material(i: int, tile: float, offset: tuple[float, float]) -> Material:
+        name, crop = windows[order[i % len(windows)]]
+        tint = tuple(float(c) for c in rng.uniform(0.45, 1.0, 3))
+        return Material(name, tint, tile, crop, offset)
+
+    side = 2 * half / n
+    for i in range(n):
+        for j in range(n):
+            c = (-half + (i + 0.5) * side, -half + (j + 0.5) * side, z - 0.05)
+            # top face (axis 2) maps (x, y)/tile + (0.74, 0.42): centre the window in one period, 90 % of it visible
+            prims.append(Box(c, material(len(prims), side / 0.9, (-0.24, 0.08)), half=(side / 2, side / 2, 0.05)))
+    width = 2 * half * math.tan(math.pi / 8)
+    for k in range(8):
+        phi = 2 * math.pi * k / 8
+        c = ((half + 0.05) * math.cos(phi), (half + 0.05) * math.sin(phi), z + wall_height / 2)
+        # local y points along the radius: the inner face is axis 1, mapping (z, x)/tile + (0.37, 0.21)
+        rot = rotation((0, 0, 1), math.degrees(phi) - 90.0)
+        prims.append(Box(c, material(len(prims), width / 0.9, (0.13, 0.29)), rot=rot,
+                         half=(width / 2 + 0.05, 0.05, wall_height / 2)))
+    return prims
+
+
 # ---------------------------------------------------------------------------------------------------------
 # Geometry. World: z up, objects within about ±1.3 of the origin (like the NeRF synthetic scenes).
 def _toy() -> list[Primitive]:
@@ -106,6 +143,7 @@ def _toy() -> list[Primitive]:
 def _blocks() -> list[Primitive]:
     rz = lambda a: rotation((0, 0, 1), a)  # noqa: E731
     return [
+        *_environment(-0.83, 11),
         Box((0.0, 0.0, -0.75), M("gravel", (0.6, 0.6, 0.65), 1.0), half=(1.2, 0.9, 0.08)),
         Box((-0.45, -0.2, -0.4), M("brick", (0.9, 0.45, 0.3), 0.6), rot=rz(10), half=(0.45, 0.35, 0.28)),
         Box((0.5, 0.25, -0.45), M("rocket", tile=0.9), rot=rz(-20), half=(0.35, 0.4, 0.22)),
@@ -126,7 +164,7 @@ def _chair() -> list[Primitive]:
         for sy in (-1, 1)
     ]
     return [
-        _ground(1.5, -1.0, M("brick", (0.55, 0.55, 0.6), 0.8)),
+        *_environment(-1.0, 12),
         *legs,
         Box((0.0, 0.0, -0.05), wood, half=(0.55, 0.5, 0.06)),
         Box((0.0, 0.0, 0.06), M("astronaut", tile=1.1), half=(0.5, 0.45, 0.05)),
@@ -145,7 +183,7 @@ def _tree() -> list[Primitive]:
         tint = (rng.uniform(0.4, 0.7), rng.uniform(0.8, 1.0), rng.uniform(0.3, 0.5))
         leaves.append(Sphere(tuple(c), M("grass", tint, 0.5), radius=float(rng.uniform(0.12, 0.24))))
     return [
-        _ground(3.0, -1.1, M("gravel", (0.8, 0.75, 0.65), 1.0)),
+        *_environment(-1.1, 13),
         Cylinder((0.0, 0.0, -0.85), M("brick", (0.85, 0.5, 0.35), 0.5), radius=0.35, half_height=0.25),
         Cylinder((0.0, 0.0, -0.6), M("moon", (0.4, 0.3, 0.2), 0.4), radius=0.3, half_height=0.02),
         Cylinder((0.0, 0.0, -0.05), M("gravel", (0.5, 0.35, 0.2), 0.4), radius=0.05, half_height=0.6),
@@ -158,7 +196,7 @@ def _tree() -> list[Primitive]:
 def _dish() -> list[Primitive]:
     horiz = rotation((0, 1, 0), 90)
     return [
-        _ground(2.0, -0.35, M("text", (0.85, 0.8, 0.7), 1.0)),
+        *_environment(-0.35, 14),
         Cylinder((0.0, 0.0, -0.3), M("moon", (0.9, 0.9, 0.95), 1.5), radius=1.0, half_height=0.04),
         Cylinder((0.0, 0.0, -0.24), M("coins", (0.95, 0.95, 1.0), 0.8), radius=0.85, half_height=0.02),
         # two "buns" and "sausages"
@@ -176,7 +214,7 @@ def _dish() -> list[Primitive]:
 def _spheres() -> list[Primitive]:
     textures = ["astronaut", "coffee", "chelsea", "rocket", "hubble", "retina", "ihc", "colorwheel", "brick"]
     tints = [(1, 1, 1)] * 8 + [(0.9, 0.5, 0.35)]
-    prims: list[Primitive] = [_ground(1.8, -0.45, M("brick", (0.5, 0.5, 0.55), 0.6))]
+    prims: list[Primitive] = _environment(-0.45, 15)
     for k, (tex, tint) in enumerate(zip(textures, tints, strict=True)):
         i, j = divmod(k, 3)
         prims.append(Sphere(((i - 1) * 0.85, (j - 1) * 0.85, -0.1), M(tex, tint, 1.0), radius=0.34))
@@ -189,7 +227,7 @@ def _drums() -> list[Primitive]:
 
     metal = M("moon", (1.0, 0.85, 0.45), 0.5)
     return [
-        _ground(2.2, -1.0, M("grass", (0.45, 0.35, 0.6), 0.8)),
+        *_environment(-1.0, 16),
         Cylinder((0.0, 0.4, -0.55), M("hubble", tile=1.2), rot=rotation((1, 0, 0), 90), radius=0.5,
                  half_height=0.28),  # bass drum
         Cylinder((-0.55, -0.25, -0.2), M("retina", tile=0.6), rot=tilt(10, 0), radius=0.3, half_height=0.14),
@@ -207,36 +245,37 @@ def _drums() -> list[Primitive]:
 SCENES: dict[str, SceneSpec] = {
     "toy": SceneSpec(
         "toy", "CI scene: a textured box and a sphere on gravel (64×48, 8 + 4 views)", _toy, (0.08, 0.08, 0.1),
-        {"width": 64, "height": 48, "n_train": 8, "n_novel": 4, "shake_rot_deg": 1.0},
+        {"width": 64, "height": 48, "n_train": 8, "n_novel": 4, "fov_deg": 40.0, "orbit_radius": 4.0,
+         "shake_rot_deg": 1.0, "shake_trans": 0.02},
     ),
     "blocks": SceneSpec(
         "blocks", "stacked textured blocks, cylinders and a ball on a plate (≈ lego)", _blocks, (0.05, 0.05, 0.06),
-        {"shake_rot_deg": 1.0},
+        {"shake_rot_deg": 1.6},
     ),
     "chair": SceneSpec(
         "chair", "a wooden chair with a photo cushion and back on a brick floor (≈ chair)", _chair,
-        (0.1, 0.1, 0.12), {"orbit_radius": 4.3, "elevation_min": 10.0, "elevation_max": 40.0,
-                           "shake_rot_deg": 0.9},
+        (0.1, 0.1, 0.12), {"orbit_radius": 3.45, "elevation_min": 10.0, "elevation_max": 40.0,
+                           "shake_rot_deg": 1.45},
         target=(0.0, 0.0, 0.0),
     ),
     "tree": SceneSpec(
         "tree", "a potted tree: thin trunk, many leaf spheres, wide floor, large depth range (≈ ficus)", _tree,
-        (0.12, 0.14, 0.18), {"orbit_radius": 4.6, "elevation_min": 8.0, "elevation_max": 35.0,
-                             "shake_rot_deg": 1.2},
+        (0.12, 0.14, 0.18), {"orbit_radius": 3.7, "elevation_min": 8.0, "elevation_max": 35.0,
+                             "shake_rot_deg": 1.9},
     ),
     "dish": SceneSpec(
         "dish", "a plate with two buns and sausages seen from close up (≈ hotdog)", _dish, (0.04, 0.04, 0.04),
-        {"orbit_radius": 3.2, "elevation_min": 25.0, "elevation_max": 60.0, "shake_rot_deg": 0.9,
-         "shake_trans": 0.015},
+        {"orbit_radius": 2.6, "elevation_min": 25.0, "elevation_max": 60.0, "shake_rot_deg": 1.45,
+         "shake_trans": 0.019},
         target=(0.0, 0.0, -0.15),
     ),
     "spheres": SceneSpec(
         "spheres", "a 3×3 grid of photo-textured spheres (≈ materials)", _spheres, (0.15, 0.15, 0.15),
-        {"orbit_radius": 4.2, "elevation_min": 20.0, "elevation_max": 50.0, "shake_rot_deg": 1.1},
+        {"orbit_radius": 3.4, "elevation_min": 20.0, "elevation_max": 50.0, "shake_rot_deg": 1.75},
     ),
     "drums": SceneSpec(
         "drums", "a drum kit: drums, thin cymbals and stands (≈ mic/drums)", _drums, (0.03, 0.03, 0.05),
-        {"orbit_radius": 4.4, "elevation_min": 10.0, "elevation_max": 40.0, "shake_rot_deg": 1.0},
+        {"orbit_radius": 3.5, "elevation_min": 10.0, "elevation_max": 40.0, "shake_rot_deg": 1.6},
     ),
 }
 SCENE_NAMES: tuple[str, ...] = tuple(SCENES)
