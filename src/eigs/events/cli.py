@@ -39,6 +39,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--mask-factor", type=float, default=8.0, metavar="K",
         help="…and only those with more than K× the mean events per pixel (default 8)",
     )
+    parser.add_argument(
+        "--per-pixel-threshold", action=argparse.BooleanOptionalAction, default=True,
+        help="estimated mode: calibrate per-pixel ON/OFF thresholds from the events between exposures (default on; "
+        "falls back to the global threshold when the recording has too few gaps with events)",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -59,6 +64,7 @@ def run(args: argparse.Namespace) -> int:
         threshold_scope=args.threshold_scope,
         mask_top=args.mask_top,
         mask_factor=args.mask_factor,
+        per_pixel_threshold=args.per_pixel_threshold,
     )
     result = compute_edi(scene, opts, path=args.scene)
     write_edi(result, args.output)

@@ -54,6 +54,10 @@ class EdiResult:
     - ``mode``: ``e2nerf`` or ``estimated``; ``threshold_scope``: ``scene``, ``view`` or ``given``.
     - ``event_mask``: optional (H, W) bool, pixels whose events were ignored (hot pixels, flicker); their
       ``cum_counts`` are zero, so an event loss should skip them. None when no mask was applied.
+    - ``threshold_pos_map``, ``threshold_neg_map``: optional (H, W) float64 per-pixel ON/OFF contrast thresholds
+      (estimated mode with per-pixel calibration, ``docs/edi.md``); the latent frames were computed with them
+      (ON events count c⁺, OFF events c⁻ at each pixel) instead of ``threshold``. None (absent) otherwise;
+      files written before they existed read as None.
     """
 
     latent: np.ndarray
@@ -68,6 +72,8 @@ class EdiResult:
     threshold_scope: str
     scene_name: str = ""
     event_mask: np.ndarray | None = None
+    threshold_pos_map: np.ndarray | None = None
+    threshold_neg_map: np.ndarray | None = None
 
     @property
     def n_views(self) -> int:
@@ -106,6 +112,19 @@ class EdiResult:
                 or (self.event_mask.dtype == np.bool_ and self.event_mask.ndim == 2),
                 "event_mask must be (H, W) bool",
             ),
+            (
+                (self.threshold_pos_map is None) == (self.threshold_neg_map is None),
+                "threshold_pos_map and threshold_neg_map come together",
+            ),
+            (
+                self.threshold_pos_map is None
+                or (
+                    self.threshold_pos_map.ndim == 2
+                    and self.threshold_neg_map is not None
+                    and self.threshold_neg_map.shape == self.threshold_pos_map.shape
+                ),
+                "threshold_pos_map / threshold_neg_map must be (H, W)",
+            ),
         ]
         for ok, msg in checks:
             if not ok:
@@ -114,6 +133,10 @@ class EdiResult:
             a = getattr(self, name)
             if not np.all(np.isfinite(a)):
                 raise EigsError(path, f"{name} has NaN/Inf values")
+        for name in ("threshold_pos_map", "threshold_neg_map"):
+            a = getattr(self, name)
+            if a is not None and not (np.all(np.isfinite(a)) and np.all(a > 0)):
+                raise EigsError(path, f"{name} must be finite and positive")
         if self.latent.size and (self.latent.min() < 0 or self.latent.max() > 1):
             raise EigsError(path, "latent must lie in [0, 1]")
         if v and np.any(self.cum_counts[:, 0] != 0):
@@ -146,6 +169,9 @@ def write_edi(result: EdiResult, path: str | os.PathLike) -> None:
             f.create_dataset(name, data=getattr(result, name))
         if result.event_mask is not None:
             f.create_dataset("event_mask", data=result.event_mask)
+        if result.threshold_pos_map is not None and result.threshold_neg_map is not None:
+            f.create_dataset("threshold_pos_map", data=np.asarray(result.threshold_pos_map, np.float64))
+            f.create_dataset("threshold_neg_map", data=np.asarray(result.threshold_neg_map, np.float64))
 
 
 def read_edi(path: str | os.PathLike, *, latent: bool = True) -> EdiResult:
@@ -178,6 +204,8 @@ def read_edi(path: str | os.PathLike, *, latent: bool = True) -> EdiResult:
                 threshold_scope=str(f.attrs["threshold_scope"]),
                 scene_name=str(f.attrs.get("scene", "")),
                 event_mask=f["event_mask"][()] if "event_mask" in f else None,
+                threshold_pos_map=f["threshold_pos_map"][()] if "threshold_pos_map" in f else None,
+                threshold_neg_map=f["threshold_neg_map"][()] if "threshold_neg_map" in f else None,
             )
     except (OSError, KeyError) as err:
         raise EigsError(p, f"corrupted EDI file ({err})") from None

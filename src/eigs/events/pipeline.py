@@ -17,6 +17,7 @@ import numpy as np
 
 from eigs.errors import EigsError
 from eigs.events import binning
+from eigs.events import calibration as cal
 from eigs.events import mask as mask_mod
 from eigs.events import threshold as thr
 from eigs.events.edi import (
@@ -52,6 +53,7 @@ class EdiOptions:
     threshold_scope: str = "scene"
     mask_top: float = mask_mod.TOP_FRACTION  # 0 disables the hot-pixel mask
     mask_factor: float = mask_mod.FACTOR
+    per_pixel_threshold: bool = True  # estimated mode: calibrate per-pixel ON/OFF thresholds from the gap events
     show_progress: bool = True
 
 
@@ -224,6 +226,12 @@ def compute_edi(scene: Scene, opts: EdiOptions, path: str = "") -> EdiResult:
             log.info("estimated thresholds per view: median %.4f, range %.4f–%.4f", fill, *np.nanpercentile(
                 thresholds, [0, 100]))
 
+    # ---- per-pixel thresholds (estimated mode, raw events continuous across the gaps)
+    maps = None
+    if mode == "estimated" and opts.per_pixel_threshold:
+        maps = _per_pixel_thresholds(scene, opts, thresholds, slices, hot, active)
+    pol_ints: dict[int, cal.PolarityIntegral] = maps[2] if maps is not None else {}
+
     # ---- latent frames
     latent = np.empty((v_n, bins + 1, h, w, ch), np.float32)
     extent = np.zeros(v_n, np.float64)
@@ -239,7 +247,9 @@ def compute_edi(scene: Scene, opts: EdiOptions, path: str = "") -> EdiResult:
             lat = edi_e2nerf(blurry[v], cum[v], c)
             latent[v] = (np.clip(lat, 0.0, 255.0) / 255.0).astype(np.float32)
         else:
-            if integrals[v] is not None:
+            if maps is not None and v in pol_ints:
+                lat = _latent_per_pixel(scene, v, times[v], lin[v], pol_ints[v], maps[0], maps[1], slices, hot)
+            elif integrals[v] is not None:
                 lat = edi_continuous(lin[v], cum[v], integrals[v].log_mean_exp(c), c)
             else:
                 lat = edi_discrete(lin[v], cum[v], c)
@@ -258,7 +268,90 @@ def compute_edi(scene: Scene, opts: EdiOptions, path: str = "") -> EdiResult:
         threshold_scope=scope,
         scene_name=scene.name,
         event_mask=hot,
+        threshold_pos_map=maps[0] if maps is not None else None,
+        threshold_neg_map=maps[1] if maps is not None else None,
     )
+
+
+def _per_pixel_thresholds(
+    scene: Scene,
+    opts: EdiOptions,
+    thresholds: np.ndarray,
+    slices: np.ndarray | None,
+    hot: np.ndarray,
+    active: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, dict[int, cal.PolarityIntegral]] | None:
+    """Per-pixel (c⁺, c⁻) maps from the gap constraints (:mod:`eigs.events.calibration`) and the per-view
+    polarity integrals the latent frames need; None (global threshold, logged) when the data cannot support them."""
+    import time
+
+    def fallback(why: str) -> None:
+        log.info("per-pixel threshold calibration not applied (%s): global threshold used", why)
+
+    if opts.threshold is not None:
+        fallback("threshold given")
+        return None
+    ev, frames = scene.events, scene.frames
+    if ev is None or len(ev) == 0 or slices is None or frames is None or frames.exposure_us is None:
+        fallback("no raw events")
+        return None
+    if active.size == 0:
+        fallback("no view has events")
+        return None
+    t0 = time.perf_counter()
+    exp = frames.exposure_us.astype(np.int64)
+    if not np.all(np.diff(exp[:, 0]) > 0):
+        fallback("exposure starts not increasing")
+        return None
+    gaps = cal.usable_gaps(ev.t, exp)
+    if int(gaps.sum()) < cal.MIN_GAPS:
+        fallback(f"{int(gaps.sum())} exposure gaps with events, at least {cal.MIN_GAPS} needed")
+        return None
+    v_n = exp.shape[0]
+    h, w = frames.blurry.shape[1:3]
+    c0 = float(np.median(thresholds[active]))
+    ints = []
+    for v in range(v_n):
+        a, b = int(slices[v, 0]), int(slices[v, 1])
+        ints.append(cal.PolarityIntegral(ev.x[a:b], ev.y[a:b], ev.t[a:b], ev.p[a:b], exp[v, 0], exp[v, 1], h, w, hot))
+    # events from start_v to start_{v+1} (the exposure and the gap); the starts must increase for the binning
+    n_pos, n_neg = cal.polarity_counts(ev.x, ev.y, ev.t, ev.p, exp[:, 0], h, w, hot)
+    bsat = [cal.log_luma_and_sigma(frames.blurry[v], scene.camera_response) for v in range(v_n)]
+    b, sigma_b, sat = (np.stack(z) for z in zip(*bsat, strict=True))
+    res = cal.calibrate(b, sigma_b, sat, ints, n_pos, n_neg, gaps, c0, mask=hot)
+    if not (np.all(np.isfinite(res.c_pos)) and np.all(np.isfinite(res.c_neg))):
+        fallback("non-finite estimate")
+        return None
+    qp = np.percentile(res.c_pos, [25, 50, 75])
+    qn = np.percentile(res.c_neg, [25, 50, 75])
+    log.info(
+        "per-pixel thresholds from %d gaps: c+ median %.4f (IQR %.4f–%.4f), c- median %.4f (IQR %.4f–%.4f); "
+        "prior centre (%.4f, %.4f), global c = %.4f; median |gap residual| %.4f → %.4f; %.1f s",
+        res.n_gaps, qp[1], qp[0], qp[2], qn[1], qn[0], qn[2], *res.pooled, c0,
+        res.residual_before, res.residual_after, time.perf_counter() - t0,
+    )
+    return res.c_pos, res.c_neg, {int(v): ints[v] for v in active}
+
+
+def _latent_per_pixel(
+    scene: Scene,
+    v: int,
+    times: np.ndarray,
+    lin: np.ndarray,
+    integral: cal.PolarityIntegral,
+    c_pos: np.ndarray,
+    c_neg: np.ndarray,
+    slices: np.ndarray | None,
+    hot: np.ndarray,
+) -> np.ndarray:
+    """(L, H, W, C) linear latent frames of view ``v`` with the per-pixel maps (reference = exposure start)."""
+    assert scene.events is not None and slices is not None and scene.frames is not None
+    assert scene.frames.exposure_us is not None
+    ev = scene.events
+    a, b = int(slices[v, 0]), int(slices[v, 1])
+    start = int(scene.frames.exposure_us[v, 0])
+    s_pos, s_neg = cal.counts_before(ev.x[a:b], ev.y[a:b], ev.t[a:b], ev.p[a:b], start, times, *lin.shape[:2], hot)
+    return cal.edi_per_pixel(lin, s_pos, s_neg, integral.log_mean_exp(c_pos, c_neg), c_pos, c_neg)
 
 
 def _eval_maps(
