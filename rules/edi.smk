@@ -12,6 +12,7 @@ rule edi:
         bins=r"\d+",
     params:
         options=edi_options,
+        per_pixel=lambda wc: "" if config.get("edi", {}).get("per_pixel_threshold", True) else "--no-per-pixel-threshold",
     log:
         "logs/edi/{scene}_b{bins}.log",
     benchmark:
@@ -23,7 +24,7 @@ rule edi:
         "../workflow/envs/eigs.yaml"
     shell:
         "eigs edi {input} -o {output.edi} --latent-dir {output.latent} --bins {wildcards.bins} "
-        "{params.options} --threads {threads} > {log} 2>&1"
+        "{params.options} {params.per_pixel} --threads {threads} > {log} 2>&1"
 
 
 rule all_edi:
