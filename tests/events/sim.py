@@ -33,14 +33,19 @@ def luma(img: np.ndarray) -> np.ndarray:
     return img[..., 0] * 0.299 + img[..., 1] * 0.587 + img[..., 2] * 0.114
 
 
-def simulate_events(logs: np.ndarray, times: np.ndarray, c: float, ref: np.ndarray):
-    """logs: (K, H, W) log intensities at ``times`` (K,) µs; returns (x, y, t, p) sorted and the final ref."""
+def simulate_events(logs: np.ndarray, times: np.ndarray, c, ref: np.ndarray, c_off=None):
+    """logs: (K, H, W) log intensities at ``times`` (K,) µs; returns (x, y, t, p) sorted and the final ref.
+    ``c``: the threshold, a number or an (H, W) map of ON thresholds; ``c_off``: an (H, W) map of OFF thresholds
+    (default: ``c``) — per-pixel threshold mismatch."""
     xs, ys, ts, ps = [], [], [], []
     h, w = logs.shape[1:]
+    c_on = np.broadcast_to(np.asarray(c, np.float64), (h, w))
+    c_off = c_on if c_off is None else np.broadcast_to(np.asarray(c_off, np.float64), (h, w))
     for k in range(1, logs.shape[0]):
         l0, l1 = logs[k - 1], logs[k]
         t0, t1 = float(times[k - 1]), float(times[k])
         for sgn in (1, -1):
+            c = c_on if sgn > 0 else c_off
             n = np.floor(sgn * (l1 - ref) / c).astype(np.int64)
             n = np.maximum(n, 0)
             idx = np.flatnonzero(n)
@@ -49,7 +54,7 @@ def simulate_events(logs: np.ndarray, times: np.ndarray, c: float, ref: np.ndarr
             cnt = n.reshape(-1)[idx]
             pix = np.repeat(idx, cnt)
             j = np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt) + 1
-            lev = ref.reshape(-1)[pix] + sgn * j * c
+            lev = ref.reshape(-1)[pix] + sgn * j * c.reshape(-1)[pix]
             a, b = l0.reshape(-1)[pix], l1.reshape(-1)[pix]
             frac = np.clip((lev - a) / np.where(b != a, b - a, 1.0), 0.0, 1.0)
             ts.append(np.rint(t0 + frac * (t1 - t0)).astype(np.int64))
@@ -76,11 +81,13 @@ def make_scene(
     exposure_us: int = 40_000,
     gap_us: int = 10_000,
     seed: int = 0,
+    c_maps: tuple[np.ndarray, np.ndarray] | None = None,
 ):
     """A camera translating/rotating along a smooth random path over the whole recording; view v is exposed over
     [v·(T + gap), v·(T + gap) + T). Events are simulated continuously (also between exposures).
 
-    ``shake_px``: typical displacement (px) during one exposure. Returns (scene, sharp) with sharp:
+    ``shake_px``: typical displacement (px) during one exposure; ``c_maps``: optional (ON, OFF) per-pixel
+    threshold maps (H, W) instead of ``c`` everywhere. Returns (scene, sharp) with sharp:
     (V, B+1, H, W, 3) linear frames at the latent times of eigs.events.binning.latent_times."""
     from eigs.events.binning import latent_times
 
@@ -101,7 +108,10 @@ def make_scene(
     times = np.arange(0, total + step / 2, step)
     frames = np.stack([render(tex, h, w, *pose(tt)) for tt in times])
     logs = np.log(luma(frames) + EPS)
-    x, y, t, p, _ = simulate_events(logs, times, c, logs[0].copy())
+    if c_maps is None:
+        x, y, t, p, _ = simulate_events(logs, times, c, logs[0].copy())
+    else:
+        x, y, t, p, _ = simulate_events(logs, times, c_maps[0], logs[0].copy(), c_off=c_maps[1])
     blurry, sharp_all = [], []
     for v in range(n_views):
         s, e = exposures[v]

@@ -40,6 +40,7 @@ MODEL_SIGMA = 0.05  # model noise floor of a gap residual (event quantisation, n
 HUBER_K = 2.0  # Huber threshold in units of the residual's σ
 ITERATIONS = 8
 MIN_STRONG = 50  # pixels with more data than prior information needed to re-centre the prior
+STRONG_EVIDENCE = 10.0 # pixels whose data carry this many times the prior information set the prior centre
 MAX_STEP = 0.05  # largest change of a threshold per Gauss–Newton iteration
 
 
@@ -279,7 +280,7 @@ def calibrate(
     # ---- stage 1: per pixel, shrunk towards c0; the centre = median over the pixels the data determine
     res0, _, _ = residuals(np.full((h, w), c0), np.full((h, w), c0), False)
     cp, cn, evidence = fit(np.full((h, w), c0), np.full((h, w), c0), c0, c0, iterations)
-    strong = evidence >= 1.0
+    strong = evidence >= STRONG_EVIDENCE
     if mask is not None:
         strong &= ~mask
     cen_p = cen_n = float(c0)
