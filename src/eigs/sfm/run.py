@@ -176,6 +176,7 @@ def run_sfm(
         # -- poses in the source (model) frame -------------------------------------------------------
         raw = np.full((V, L, 4, 4), np.nan)
         registered = np.zeros((V, L), bool)
+        rejected: list[str] = []  # COLMAP mode: latents registered far from their view's other latents
         if mode == "given":
             got = _given_poses(scene, edi.timestamps_us, scene_path)
             c2w_by_name = {n: got[v, k] for (v, k), n in zip(slots, names, strict=True)}
@@ -221,6 +222,14 @@ def run_sfm(
                     f"Remedies: {_remedies(mode)}",
                 )
             rec = res.reconstruction
+            from eigs.sfm.outliers import reject_sibling_outliers
+
+            with timer("sibling check"):
+                rejected = reject_sibling_outliers(
+                    rec,
+                    {n: v for (v, _k), n in zip(slots, names, strict=True)},
+                    refine_intrinsics=opts.refine_intrinsics,
+                )
             if res.lost_to_other_models:
                 report["models_note"] = (
                     f"COLMAP split the scene into {len(res.model_sizes)} models; the largest "
@@ -243,6 +252,7 @@ def run_sfm(
             "registered": n_reg,
             "fraction": frac,
             "unregistered": unreg,
+            "rejected_far_from_view": rejected,
         }
         log.info("registered %d of %d latent frames (%.1f %%)", n_reg, len(names), 100 * frac)
         if frac < cfg.min_registered_fraction:
