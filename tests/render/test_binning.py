@@ -30,7 +30,9 @@ def _reference_bins(means2d, extents, depths, radii, width: int, height: int) ->
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
 def test_binning_order_is_exact_for_any_thread_count(dtype: torch.dtype) -> None:
     g = torch.Generator().manual_seed(5)
-    n, W, H = 4000, 83, 61  # >= 3 x 1024 Gaussians: 3 threads really run (3 sorted runs, 2 merge rounds)
+    # >= 4 x 256 Gaussians: up to 4 threads really run (3 runs: 2 merge rounds, one with an odd run; every merge
+    # is cut into one piece per thread at co-ranks)
+    n, W, H = 4000, 83, 61
     means2d = (torch.rand(n, 2, generator=g, dtype=torch.float64) * torch.tensor([W + 40.0, H + 40.0]) - 20).to(dtype)
     extents = (0.5 + 12 * torch.rand(n, 2, generator=g, dtype=torch.float64)).to(dtype)
     # few distinct depths: many ties, which must be ordered by index
@@ -44,7 +46,7 @@ def test_binning_order_is_exact_for_any_thread_count(dtype: torch.dtype) -> None
     C = _backend.load()
     before = torch.get_num_threads()
     try:
-        for threads in (1, 2, 3):
+        for threads in (1, 2, 3, 4):
             torch.set_num_threads(threads)
             offsets, ids = C.isect_tiles(means2d, extents, depths, radii, W, H)
             assert torch.equal(offsets, want_offsets), threads

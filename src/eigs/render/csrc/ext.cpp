@@ -50,7 +50,7 @@ int threads(int64_t work, int64_t grain) {
 
 // Gaussians per thread below which projection (and its backward) and binning run on fewer threads.
 constexpr int64_t kProjectGrain = 256;
-constexpr int64_t kIsectGrain = 512;
+constexpr int64_t kIsectGrain = 256;
 
 int64_t n_tiles_of(int64_t width, int64_t height) { return ((width + 15) / 16) * ((height + 15) / 16); }
 

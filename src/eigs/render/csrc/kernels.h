@@ -3,6 +3,7 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 namespace eigs {
@@ -37,14 +38,15 @@ void project_backward(int64_t n, const S* means, const S* quats, const S* scales
 // isect_plan: for the Gaussians with radii > 0, the order (ascending depth, ties by index), their tile
 // rectangles and the pair counts; writes tile_offsets (n_tiles + 1, exclusive prefix sum) and returns n_isects.
 // isect_fill: flatten_ids (n_isects): per tile (row-major tile order), the Gaussian ids in that order.
-// Parallel over nthreads chunks (sort per chunk + merge; per-chunk tile cursors): the result is the same for
-// any thread count.
+// Parallel over nthreads chunks (sort per chunk + pairwise merges, each merge split among the threads at
+// co-ranks; per-chunk tile cursors): the result is the same for any thread count.
+// The buffers are left uninitialised on allocation (every entry read is written first): no serial memsets.
 struct IsectPlan {
-    std::vector<int64_t> order;   // visible Gaussians in (depth, index) order
-    std::vector<int32_t> rect;    // per Gaussian: tile columns [0], [1], tile rows [2], [3] (inclusive)
-    std::vector<int64_t> cursor;  // nchunks x n_tiles: where chunk c writes into tile t
+    std::unique_ptr<int64_t[]> order;  // visible Gaussians in (depth, index) order (n_visible entries)
+    std::unique_ptr<int32_t[]> rect;   // per Gaussian: tile columns [0], [1], tile rows [2], [3] (inclusive)
+    std::vector<int64_t> cursor;       // nchunks x n_tiles: where chunk c writes into tile t
     int nchunks = 1;
-    int64_t n_tiles = 0, tiles_x = 0;
+    int64_t n_visible = 0, n_tiles = 0, tiles_x = 0;
 };
 
 template <typename S>

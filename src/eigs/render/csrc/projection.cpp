@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <memory>
 #include <numeric>
 #include <vector>
 
@@ -318,24 +319,45 @@ struct DepthKey {
 // [lo, hi) of chunk c of n items split into k near-equal chunks.
 inline int64_t chunk_lo(int64_t n, int k, int c) { return n * c / k; }
 
+// Co-rank of output position p in the merge of sorted runs a (na) and b (nb) of unique keys: the number of
+// elements of a among the first p outputs.  Lets several threads merge disjoint output ranges of one merge.
+template <typename K>
+int64_t co_rank(int64_t p, const K* a, int64_t na, const K* b, int64_t nb) {
+    int64_t lo = std::max<int64_t>(0, p - nb), hi = std::min(p, na);
+    while (lo < hi) {
+        const int64_t i = lo + (hi - lo) / 2, j = p - i;
+        if (j > 0 && i < na && a[i] < b[j - 1])
+            lo = i + 1;
+        else
+            hi = i;
+    }
+    return lo;
+}
+
 }  // namespace
 
 template <typename S>
 int64_t isect_plan(int64_t n, const S* means2d, const S* extents, const S* depths, const int32_t* radii,
                    int64_t width, int64_t height, int64_t* tile_offsets, IsectPlan& plan, int nthreads) {
+    using Key = DepthKey<S>;
     const int64_t tiles_x = (width + kTile - 1) / kTile, tiles_y = (height + kTile - 1) / kTile;
     const int64_t n_tiles = tiles_x * tiles_y;
     const int k = std::max(1, nthreads);
+    const size_t n1 = size_t(std::max<int64_t>(n, 1));
     plan.n_tiles = n_tiles;
     plan.tiles_x = tiles_x;
     plan.nchunks = k;
-    plan.rect.assign(size_t(4 * std::max<int64_t>(n, 1)), 0);
+    plan.rect.reset(new int32_t[4 * n1]);
+    plan.order.reset(new int64_t[n1]);
     std::vector<int64_t> kept(size_t(k) + 1, 0);
-    std::vector<DepthKey<S>> keys(static_cast<size_t>(n)), tmp;
-    plan.order.resize(size_t(n));
+    std::unique_ptr<Key[]> keys_buf(new Key[n1]), tmp_buf(k > 1 ? new Key[n1] : nullptr);
+    Key* keys = keys_buf.get();
+    Key* tmp = tmp_buf.get();
     plan.cursor.assign(size_t(k) * size_t(n_tiles), 0);
-    int32_t* rect = plan.rect.data();
+    int32_t* rect = plan.rect.get();
+    int64_t* order = plan.order.get();
     int64_t* cnt = plan.cursor.data();
+    std::vector<int64_t> starts;  // run boundaries, rewritten by one thread between merge rounds
 #pragma omp parallel num_threads(k)
     {
         // 1. per chunk of Gaussians: tile rectangles of the visible ones, compacted into keys, sorted.
@@ -356,42 +378,48 @@ int64_t isect_plan(int64_t n, const S* means2d, const S* extents, const S* depth
                 r[1] = int32_t(j1 / kTile);
                 r[2] = int32_t(i0 / kTile);
                 r[3] = int32_t(i1 / kTile);
-                keys[size_t(lo + m)] = DepthKey<S>{depths[g], g};
+                keys[lo + m] = Key{depths[g], g};
                 ++m;
             }
             kept[size_t(c) + 1] = m;
-            std::sort(keys.begin() + lo, keys.begin() + lo + m);
+            std::sort(keys + lo, keys + lo + m);
         }
-        // 2. merge the sorted runs (serial for one run; pairwise merges otherwise).
+        // 2. compact the sorted runs (serial, in place: each run moves left), then pairwise merge rounds; every
+        // merge's output is cut into k pieces at co-ranks and the pieces are merged by all threads.
 #pragma omp single
         {
             int64_t pos = 0;
-            std::vector<int64_t> starts;
             for (int c = 0; c < k; ++c) {
                 const int64_t lo = chunk_lo(n, k, c), m = kept[size_t(c) + 1];
-                std::move(keys.begin() + lo, keys.begin() + lo + m, keys.begin() + pos);
+                if (lo != pos) std::move(keys + lo, keys + lo + m, keys + pos);
                 starts.push_back(pos);
                 pos += m;
             }
             starts.push_back(pos);
             kept[0] = pos;
-            tmp.resize(size_t(pos));
-            // Pairwise merge rounds; a round's merges are independent.
-            while (starts.size() > 2) {
-                const int64_t runs = int64_t(starts.size()) - 1;
-                std::vector<int64_t> next;
-                for (int64_t r = 0; r < runs; r += 2) {
-                    next.push_back(starts[size_t(r)]);
+        }
+        while (starts.size() > 2) {
+            const int64_t runs = int64_t(starts.size()) - 1;
+#pragma omp for schedule(static, 1) collapse(2)
+            for (int64_t r = 0; r < runs; r += 2) {
+                for (int piece = 0; piece < k; ++piece) {
                     const int64_t a = starts[size_t(r)], b = starts[size_t(r) + 1];
                     const int64_t e = r + 2 <= runs ? starts[size_t(r) + 2] : b;
-#pragma omp task firstprivate(a, b, e)
-                    std::merge(keys.begin() + a, keys.begin() + b, keys.begin() + b, keys.begin() + e,
-                               tmp.begin() + a);
+                    const int64_t na = b - a, nb = e - b;
+                    const int64_t p0 = (na + nb) * piece / k, p1 = (na + nb) * (piece + 1) / k;
+                    const int64_t i0 = co_rank(p0, keys + a, na, keys + b, nb);
+                    const int64_t i1 = co_rank(p1, keys + a, na, keys + b, nb);
+                    std::merge(keys + a + i0, keys + a + i1, keys + b + (p0 - i0), keys + b + (p1 - i1),
+                               tmp + a + p0);
                 }
-#pragma omp taskwait
-                next.push_back(pos);
-                std::swap(keys, tmp);
+            }
+#pragma omp single
+            {
+                std::vector<int64_t> next;
+                for (int64_t r = 0; r < runs; r += 2) next.push_back(starts[size_t(r)]);
+                next.push_back(starts.back());
                 starts.swap(next);
+                std::swap(keys, tmp);
             }
         }
         const int64_t m = kept[0];
@@ -400,15 +428,15 @@ int64_t isect_plan(int64_t n, const S* means2d, const S* extents, const S* depth
         for (int c = 0; c < k; ++c) {
             int64_t* cc = cnt + size_t(c) * size_t(n_tiles);
             for (int64_t i = chunk_lo(m, k, c); i < chunk_lo(m, k, c + 1); ++i) {
-                const int64_t g = keys[size_t(i)].g;
-                plan.order[size_t(i)] = g;
+                const int64_t g = keys[i].g;
+                order[i] = g;
                 const int32_t* r = rect + 4 * g;
                 for (int64_t ty = r[2]; ty <= r[3]; ++ty)
                     for (int64_t tx = r[0]; tx <= r[1]; ++tx) ++cc[ty * tiles_x + tx];
             }
         }
     }
-    plan.order.resize(size_t(kept[0]));
+    plan.n_visible = kept[0];
     // 4. offsets = exclusive prefix sum over tiles; chunk c of tile t starts after chunks < c of that tile.
     int64_t total = 0;
     for (int64_t t = 0; t < n_tiles; ++t) {
@@ -426,13 +454,13 @@ int64_t isect_plan(int64_t n, const S* means2d, const S* extents, const S* depth
 
 void isect_fill(IsectPlan& plan, int64_t* flatten_ids) {
     const int k = plan.nchunks;
-    const int64_t m = int64_t(plan.order.size()), n_tiles = plan.n_tiles, tiles_x = plan.tiles_x;
-    const int32_t* rect = plan.rect.data();
+    const int64_t m = plan.n_visible, n_tiles = plan.n_tiles, tiles_x = plan.tiles_x;
+    const int32_t* rect = plan.rect.get();
 #pragma omp parallel for num_threads(k) schedule(static, 1)
     for (int c = 0; c < k; ++c) {
         int64_t* cur = plan.cursor.data() + size_t(c) * size_t(n_tiles);
         for (int64_t i = chunk_lo(m, k, c); i < chunk_lo(m, k, c + 1); ++i) {
-            const int64_t g = plan.order[size_t(i)];
+            const int64_t g = plan.order[i];
             const int32_t* r = rect + 4 * g;
             for (int64_t ty = r[2]; ty <= r[3]; ++ty)
                 for (int64_t tx = r[0]; tx <= r[1]; ++tx) flatten_ids[cur[ty * tiles_x + tx]++] = g;
