@@ -170,8 +170,9 @@ std::tuple<Tensor, Tensor, Tensor, Tensor, Tensor> rasterize_bwd(Tensor means2d,
     const int64_t n_isects = flatten_ids.size(0);
     auto opt = means2d.options();
     Tensor pair_grads = torch::empty({n_isects, 6 + d}, opt);
-    Tensor v_means2d = torch::zeros({n, 2}, opt), v_conics = torch::zeros({n, 3}, opt);
-    Tensor v_opacities = torch::zeros({n}, opt), v_colors = torch::zeros({n, d}, opt);
+    // Not zeroed here: each reducing thread zeroes its own range of Gaussians (no serial memset).
+    Tensor v_means2d = torch::empty({n, 2}, opt), v_conics = torch::empty({n, 3}, opt);
+    Tensor v_opacities = torch::empty({n}, opt), v_colors = torch::empty({n, d}, opt);
     Tensor v_background = torch::empty({d}, opt);
     AT_DISPATCH_FLOATING_TYPES(dt, "rasterize_bwd", [&] {
         eigs::rasterize_backward<scalar_t>(

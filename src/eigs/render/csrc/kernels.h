@@ -68,7 +68,7 @@ void rasterize_forward(const S* means2d, const S* conics, const S* colors, const
 // Backward compositing.  v_image (H,W,D), v_alpha (H,W) -> per-pair gradients pair_grads (n_isects, 6 + D)
 // in the order (v_mean2d x, y, v_conic a, b, c, v_opacity, v_color...), then reduced in isect order (a fixed
 // order: deterministic for any thread count) into v_means2d (N,2), v_conics (N,3), v_opacities (N),
-// v_colors (N,D), which must be zero on entry; v_background (D) = sum over pixels of T_final v_image, summed
+// v_colors (N,D) (overwritten: each reducing thread zeroes its own Gaussians first); v_background (D) = sum over pixels of T_final v_image, summed
 // per tile (row-major pixels) and then over tiles in tile order (deterministic too).
 template <typename S>
 void rasterize_backward(int64_t n, const S* means2d, const S* conics, const S* colors, const S* opacities,

@@ -235,6 +235,10 @@ void rasterize_backward(int64_t n, const S* means2d, const S* conics, const S* c
         // the same for any thread count.
         const int nt = omp_get_num_threads(), tid = omp_get_thread_num();
         const int64_t lo = n * tid / nt, hi = n * (tid + 1) / nt;
+        std::fill(v_means2d + 2 * lo, v_means2d + 2 * hi, S(0));
+        std::fill(v_conics + 3 * lo, v_conics + 3 * hi, S(0));
+        std::fill(v_opacities + lo, v_opacities + hi, S(0));
+        std::fill(v_colors + d * lo, v_colors + d * hi, S(0));
         for (int64_t i = 0; i < n_isects; ++i) {
             const int64_t g = flatten_ids[i];
             if (g < lo || g >= hi) continue;
