@@ -232,12 +232,38 @@ def test_texture_offset_shifts_the_lookup():
 
 
 def test_room_shows_each_photograph_window_once():
+    from eigs.synth.raycast import Patchwork
     from eigs.synth.scenes import SCENES, _environment
 
     room = _environment(-1.0, 3)
-    keys = [(p.material.texture, p.material.crop) for p in room]
-    assert len(room) == 36 + 8 and len(set(keys)) == len(keys)
+    floor = [p for p in room if isinstance(p, Patchwork)]
+    assert len(floor) == 1 and len(floor[0].cells) == 36 and len(room) == 1 + 8
+    keys = [(m.texture, m.crop) for m in floor[0].cells] + [(p.material.texture, p.material.crop) for p in room[1:]]
+    assert len(set(keys)) == len(keys) == 44
     # every benchmark scene stands in a room; toy does not
     for name, spec in SCENES.items():
-        n_room = sum(1 for p in spec.build() if p.material.crop[2] == 0.5 and p.material.offset != (0.0, 0.0))
-        assert n_room == (0 if name == "toy" else 44), name
+        assert sum(isinstance(p, Patchwork) for p in spec.build()) == (0 if name == "toy" else 1), name
+
+
+def test_patchwork_floor_renders_like_its_cells_as_boxes():
+    """The one-primitive floor shows exactly what n² flat boxes with centred texture windows show."""
+    from eigs.synth.raycast import Box, Material, Patchwork, RayCaster
+    from eigs.synth.trajectory import look_at
+
+    n, half, z = 3, 1.5, -0.2
+    side = 2 * half / n
+    names = ["astronaut", "camera", "chelsea", "coffee", "coins", "hubble", "ihc", "moon", "retina"]
+    cells = tuple(Material(t, (0.9, 0.7 + 0.03 * i, 0.6), side / 0.9, (0.5 * (i % 2), 0.0, 0.5))
+                  for i, t in enumerate(names))  # fmt: skip
+    boxes = [
+        Box((-half + (i + 0.5) * side, -half + (j + 0.5) * side, z - 1e-4),
+            Material(m.texture, m.tint, m.tile, m.crop, (-0.24, 0.08)), half=(side / 2, side / 2, 1e-4))
+        for idx, m in enumerate(cells) for i, j in [divmod(idx, n)]
+    ]  # fmt: skip
+    c2w = look_at(np.array([[2.5, -1.5, 2.0], [0.3, 2.8, 1.2]]), np.array([0.0, 0.0, z]))
+    K = np.array([[60.0, 0, 32], [0, 60.0, 24], [0, 0, 1]])
+    a = RayCaster([Patchwork((0.0, 0.0, z), cells[0], half=half, cells=cells)]).render(c2w, K, 64, 48).rgb
+    b = RayCaster(boxes).render(c2w, K, 64, 48).rgb
+    differ = np.abs(a - b).max(axis=-1) > 1e-4
+    assert differ.mean() < 0.005  # only where a ray grazes the (1e-4 thin) boxes' sides at the floor's edge
+    assert np.abs(a - b).max(axis=-1)[~differ].max() < 1e-4

@@ -75,6 +75,12 @@ class Primitive(ABC):
     def bound_radius(self) -> float:
         """Radius of a sphere about ``center`` that contains the solid (world units)."""
 
+    def albedo(self, size: int, floor: float) -> np.ndarray:
+        """(S, S, 3) float32 linear albedo texture: ``tint · (floor + (1 − floor) · texture)``, S = ``size``."""
+        m = self.material
+        tex = floor + (1 - floor) * load_texture(m.texture, size, m.crop)
+        return (tex * np.asarray(m.tint, F32)).astype(F32)
+
 
 def _pick_t(t0: np.ndarray, t1: np.ndarray, ok: np.ndarray) -> np.ndarray:
     t = np.where(t0 >= _EPS_T, t0, np.where(t1 >= _EPS_T, t1, np.inf))
@@ -142,6 +148,55 @@ class Box(Primitive):
 
 
 @dataclass
+class Patchwork(Primitive):
+    """A horizontal floor through ``center``: n × n square cells covering ±``half`` (local x, y), seen from
+    above, each showing its own material (texture window and tint); ``material`` is unused. One ray–plane test
+    per ray, however many cells. Cell (i, j) spans x ∈ [−half + i·side, −half + (i+1)·side), likewise y with j,
+    side = 2·half/n; inside it the texture coordinates run over [0.05, 0.95] of the cell's texture, i.e. exactly
+    what a flat box of that size with ``tile = side/0.9`` and a centred window would show, without the cost of
+    n² primitives."""
+
+    half: float = 7.5
+    cells: tuple[Material, ...] = ()  # n² materials, index i·n + j
+
+    @property
+    def n(self) -> int:
+        return int(round(len(self.cells) ** 0.5))
+
+    def intersect(self, o: np.ndarray, d: Vec) -> np.ndarray:
+        dz = d[2]
+        t = -o[2] / np.where(np.abs(dz) < 1e-12, F32(1e-12), dz)
+        x, y = o[0] + t * d[0], o[1] + t * d[1]
+        hit = (t >= _EPS_T) & (np.abs(x) <= self.half) & (np.abs(y) <= self.half)
+        return np.where(hit, t, np.inf).astype(F32)
+
+    def surface(self, p: Vec) -> tuple[Vec, np.ndarray, np.ndarray]:
+        n = self.n
+        fx = np.clip((p[0] + self.half) / (2 * self.half) * n, 0.0, n - 1e-4)
+        fy = np.clip((p[1] + self.half) / (2 * self.half) * n, 0.0, n - 1e-4)
+        i, j = np.floor(fx), np.floor(fy)
+        # the atlas holds cell (i, j) at texture columns i·S… and rows j·S…: (u, v) in atlas repeats
+        u = (i + 0.05 + 0.9 * (fx - i)) / n
+        v = (j + 0.05 + 0.9 * (fy - j)) / n
+        zero = np.zeros_like(p[0])
+        return (zero, zero, zero + 1), u.astype(F32), v.astype(F32)
+
+    def bound_radius(self) -> float:
+        return float(self.half * np.sqrt(2.0))
+
+    def albedo(self, size: int, floor: float) -> np.ndarray:
+        n = self.n
+        if n * n != len(self.cells) or n == 0:
+            raise ValueError(f"Patchwork needs n² cell materials, got {len(self.cells)}")
+        atlas = np.empty((n * size, n * size, 3), F32)
+        for idx, m in enumerate(self.cells):
+            i, j = divmod(idx, n)
+            tex = floor + (1 - floor) * load_texture(m.texture, size, m.crop)
+            atlas[j * size : (j + 1) * size, i * size : (i + 1) * size] = tex * np.asarray(m.tint, F32)
+        return atlas
+
+
+@dataclass
 class Cylinder(Primitive):
     """Capped cylinder along local z: radius ``radius``, from z = −``half_height`` to +``half_height``."""
 
@@ -197,6 +252,13 @@ class Lighting:
 
     ambient: float = 0.3
     lights: tuple[tuple[tuple[float, float, float], float], ...] = (((0.4, -0.5, 1.0), 0.8), ((-0.6, 0.4, 0.3), 0.25))
+
+
+def _box_corners(b: Box) -> np.ndarray:
+    """(8, 3) world coordinates of a box's corners, pushed out by 0.1 % (a conservative culling bound)."""
+    signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], np.float64)
+    local = signs * (np.asarray(b.half, np.float64) * 1.001 + 1e-6)
+    return local @ np.asarray(b.rot, np.float64).T + np.asarray(b.center, np.float64)
 
 
 def mirror_tile(tex: np.ndarray) -> np.ndarray:
@@ -261,14 +323,15 @@ class RayCaster:
         self._lights = [
             (np.asarray(dvec, np.float64) / np.linalg.norm(dvec), float(gain)) for dvec, gain in self.lighting.lights
         ]
-        self._tex_size = int(texture_size)
-        self._tex = []
+        self._tex, self._tex_size = [], []
         for p in self.primitives:
-            albedo = albedo_floor + (1 - albedo_floor) * load_texture(p.material.texture, texture_size, p.material.crop)
-            self._tex.append(mirror_tile((albedo * np.asarray(p.material.tint, F32)).astype(F32)))
+            albedo = p.albedo(int(texture_size), albedo_floor)
+            self._tex.append(mirror_tile(albedo))
+            self._tex_size.append(albedo.shape[0])
         self._rot = [np.asarray(p.rot, dtype=np.float64) for p in self.primitives]
         self._ctr = [np.asarray(p.center, dtype=np.float64) for p in self.primitives]
         self._rad = [p.bound_radius() for p in self.primitives]
+        self._corners = [_box_corners(p) if isinstance(p, Box) else None for p in self.primitives]
 
     def _grid(self, K: np.ndarray, width: int, height: int, s: int) -> tuple[np.ndarray, np.ndarray]:
         """Camera-frame ray directions (z = 1) on the supersampled grid: x, y each (H·s, W·s) float32."""
@@ -285,6 +348,14 @@ class RayCaster:
         self, k: int, w2c: np.ndarray, K: np.ndarray, gh: int, gw: int, s: int
     ) -> tuple[int, int, int, int] | None:
         """Rows/cols [r0, r1) × [c0, c1) of the supersampled grid that may see primitive k; None if none."""
+        corners = self._corners[k]
+        if corners is not None:  # a box: its projection lies in the hull of its corners' projections
+            pc = corners @ w2c[:3, :3].T + w2c[:3, 3]  # (8, 3) camera frame
+            if pc[:, 2].max() <= _EPS_T:
+                return None
+            if pc[:, 2].min() > 1e-3:
+                xs, ys = list(pc[:, 0] / pc[:, 2]), list(pc[:, 1] / pc[:, 2])
+                return self._pixel_box(xs, ys, K, gh, gw, s)
         c = w2c[:3, :3] @ self._ctr[k] + w2c[:3, 3]
         r = self._rad[k] * 1.001 + 1e-6
         if c[2] + r <= _EPS_T:
@@ -294,6 +365,11 @@ class RayCaster:
         zs = (c[2] - r, c[2] + r)
         xs = [(c[0] + a) / z for a in (-r, r) for z in zs]
         ys = [(c[1] + a) / z for a in (-r, r) for z in zs]
+        return self._pixel_box(xs, ys, K, gh, gw, s)
+
+    @staticmethod
+    def _pixel_box(xs: list, ys: list, K: np.ndarray, gh: int, gw: int, s: int) -> tuple[int, int, int, int] | None:
+        """Grid rows/cols covering normalised image points with these x and y extremes (one-pixel margin)."""
         x0 = (K[0, 0] * min(xs) + K[0, 1] * (min(ys) if K[0, 1] >= 0 else max(ys)) + K[0, 2]) * s
         x1 = (K[0, 0] * max(xs) + K[0, 1] * (max(ys) if K[0, 1] >= 0 else min(ys)) + K[0, 2]) * s
         y0 = (K[1, 1] * min(ys) + K[1, 2]) * s
@@ -374,7 +450,7 @@ class RayCaster:
             du, dv = prim.material.offset
             if du or dv:
                 u, v = u + F32(du), v + F32(dv)
-            col = sample_texture(self._tex[k], self._tex_size, u, v) * shade_k[:, None]
+            col = sample_texture(self._tex[k], self._tex_size[k], u, v) * shade_k[:, None]
             out[:, r0:r1, c0:c1][mask] = col
         np.clip(out, 0.0, 1.0, out=out)
         return out, best

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from eigs.errors import EigsError
-from eigs.synth.raycast import Box, Cylinder, Lighting, Material, Primitive, Sphere, rotation
+from eigs.synth.raycast import Box, Cylinder, Lighting, Material, Patchwork, Primitive, Sphere, rotation
 
 # ---------------------------------------------------------------------------------------------------------
 # Parameters: global defaults (every scene), each scene may change some; users override any of them.
@@ -114,18 +114,15 @@ def _environment(z: float, seed: int, half: float = 7.5, n: int = 6, wall_height
         return Material(name, tint, tile, crop, offset)
 
     side = 2 * half / n
-    for i in range(n):
-        for j in range(n):
-            c = (-half + (i + 0.5) * side, -half + (j + 0.5) * side, z - 0.05)
-            # top face (axis 2) maps (x, y)/tile + (0.74, 0.42): centre the window in one period, 90 % of it visible
-            prims.append(Box(c, material(len(prims), side / 0.9, (-0.24, 0.08)), half=(side / 2, side / 2, 0.05)))
+    cells = tuple(material(i, side / 0.9, (0.0, 0.0)) for i in range(n * n))  # 90 % of each window visible
+    prims.append(Patchwork((0.0, 0.0, z), cells[0], half=half, cells=cells))
     width = 2 * half * math.tan(math.pi / 8)
     for k in range(8):
         phi = 2 * math.pi * k / 8
         c = ((half + 0.05) * math.cos(phi), (half + 0.05) * math.sin(phi), z + wall_height / 2)
         # local y points along the radius: the inner face is axis 1, mapping (z, x)/tile + (0.37, 0.21)
         rot = rotation((0, 0, 1), math.degrees(phi) - 90.0)
-        prims.append(Box(c, material(len(prims), width / 0.9, (0.13, 0.29)), rot=rot,
+        prims.append(Box(c, material(n * n + k, width / 0.9, (0.13, 0.29)), rot=rot,
                          half=(width / 2 + 0.05, 0.05, wall_height / 2)))
     return prims
 
