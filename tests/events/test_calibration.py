@@ -11,6 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from eigs.events import calibration as cal
+from eigs.events.binning import polarity_counts
 from eigs.events.edi import ExposureIntegral
 from eigs.events.edi_file import read_edi, write_edi
 from eigs.events.pipeline import EdiOptions, compute_edi
@@ -172,7 +173,7 @@ def test_never_nan_or_inf(seed, scale, frame, c0):
     else:
         frames = np.full((v_n, h, w, 3), 0 if frame == "black" else 255, np.uint8)
     ints = [cal.PolarityIntegral(x, y, t, p, int(s), int(e), h, w) for s, e in exp]
-    n_pos, n_neg = cal.polarity_counts(x, y, t, p, exp[:, 0], h, w)
+    n_pos, n_neg = polarity_counts(x, y, t, p, exp[:, 0], h, w)
     b, sb, sat = (np.stack(z) for z in zip(*[cal.log_luma_and_sigma(f, "srgb") for f in frames], strict=True))
     res = cal.calibrate(b, sb, sat, ints, n_pos, n_neg, cal.usable_gaps(t, exp), c0)
     for m, cen in ((res.c_pos, res.pooled[0]), (res.c_neg, res.pooled[1])):

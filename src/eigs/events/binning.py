@@ -48,6 +48,22 @@ def bin_events(
     events outside [edges[0], edges[B]) are ignored. ``mask``: optional (H, W) bool, True = ignore the pixel's
     events (hot/flickering pixels). Returns (B, H, W) int32.
     """
+    on, off = polarity_counts(x, y, t, p, edges_us, height, width, mask)
+    return (on - off).astype(np.int32)
+
+
+def polarity_counts(
+    x: np.ndarray,
+    y: np.ndarray,
+    t: np.ndarray,
+    p: np.ndarray,
+    edges_us: np.ndarray,
+    height: int,
+    width: int,
+    mask: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(ON, OFF) event counts per bin, both ≥ 0, each (B, H, W) int64; arguments as :func:`bin_events` (whose
+    signed counts are ON − OFF). Integer bincounts keep the sums exact."""
     edges_us = np.asarray(edges_us, dtype=np.int64)
     nb = edges_us.shape[0] - 1
     if nb < 1 or np.any(np.diff(edges_us) <= 0):
@@ -61,10 +77,9 @@ def bin_events(
     idx = k[keep] * (height * width) + pix[keep]
     pol = np.asarray(p)[keep]
     n = nb * height * width
-    # two integer bincounts (ON, OFF) keep the sums exact
-    on = np.bincount(idx[pol > 0], minlength=n)
-    off = np.bincount(idx[pol < 0], minlength=n)
-    return (on - off).astype(np.int32).reshape(nb, height, width)
+    on = np.bincount(idx[pol > 0], minlength=n).reshape(nb, height, width)
+    off = np.bincount(idx[pol < 0], minlength=n).reshape(nb, height, width)
+    return on.astype(np.int64), off.astype(np.int64)
 
 
 def cumulative_counts(counts: np.ndarray) -> np.ndarray:

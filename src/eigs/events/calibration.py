@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from eigs.events.edi import EXP_CLIP, LOG_EPS, luma, srgb_to_linear
+from eigs.events.edi import EXP_CLIP, LOG_EPS, exposure_events, luma, srgb_to_linear
 
 log = logging.getLogger(__name__)
 
@@ -53,12 +53,7 @@ class PolarityIntegral:
 
     def __init__(self, x, y, t, p, start: int, end: int, height: int, width: int, mask=None):
         self.height, self.width = int(height), int(width)
-        t = np.asarray(t, dtype=np.int64)
-        q = np.asarray(y, dtype=np.int64) * width + np.asarray(x, dtype=np.int64)
-        keep = (t >= start) & (t < end)
-        if mask is not None:
-            keep &= ~np.asarray(mask, dtype=bool).reshape(-1)[q]
-        q, t, p = q[keep], t[keep], np.asarray(p)[keep]
+        q, t, p = exposure_events(x, y, t, p, start, end, width, mask)
         duration = max(int(end) - int(start), 1)
         order = np.argsort(q, kind="stable")
         qs, ts, on = q[order], t[order], (p[order] > 0)
@@ -118,25 +113,6 @@ class PolarityIntegral:
         if grad:
             return out.reshape(shape), mp.reshape(shape), mn.reshape(shape)
         return out.reshape(shape)
-
-
-def polarity_counts(x, y, t, p, edges_us, height: int, width: int, mask=None) -> tuple[np.ndarray, np.ndarray]:
-    """(ON, OFF) event counts per bin between consecutive ``edges_us`` (like :func:`binning.bin_events`, but the two
-    polarities apart, both ≥ 0). Returns two (B, H, W) int64."""
-    edges_us = np.asarray(edges_us, dtype=np.int64)
-    nb = edges_us.shape[0] - 1
-    t = np.asarray(t, dtype=np.int64)
-    k = np.searchsorted(edges_us, t, side="right") - 1
-    keep = (k >= 0) & (k < nb)
-    pix = np.asarray(y, dtype=np.int64) * width + np.asarray(x, dtype=np.int64)
-    if mask is not None:
-        keep &= ~np.asarray(mask, dtype=bool).reshape(-1)[pix]
-    idx = k[keep] * (height * width) + pix[keep]
-    pol = np.asarray(p)[keep]
-    n = max(nb, 0) * height * width
-    on = np.bincount(idx[pol > 0], minlength=n).reshape(max(nb, 0), height, width)
-    off = np.bincount(idx[pol < 0], minlength=n).reshape(max(nb, 0), height, width)
-    return on.astype(np.int64), off.astype(np.int64)
 
 
 def counts_before(x, y, t, p, start: int, times: np.ndarray, height: int, width: int, mask=None):

@@ -107,6 +107,17 @@ def edi_discrete(
     return (np.asarray(blurry_linear, np.float64) + eps)[None] * _safe_exp(log_f)[..., None] - eps
 
 
+def exposure_events(x, y, t, p, start: int, end: int, width: int, mask=None) -> tuple[np.ndarray, ...]:
+    """Events with start ≤ t < end, off masked pixels (``mask`` (H, W) bool, True = ignore): flat pixel index
+    q = y·width + x, t and p, each (N,) int64, in their input order."""
+    t = np.asarray(t, dtype=np.int64)
+    q = np.asarray(y, dtype=np.int64) * width + np.asarray(x, dtype=np.int64)
+    keep = (t >= start) & (t < end)
+    if mask is not None:
+        keep &= ~np.asarray(mask, dtype=bool).reshape(-1)[q]
+    return q[keep], t[keep], np.asarray(p, dtype=np.int64)[keep]
+
+
 class ExposureIntegral:
     """The exact per-pixel event integral of one exposure, for the continuous-time double integral.
 
@@ -136,12 +147,7 @@ class ExposureIntegral:
         mask: np.ndarray | None = None,
     ):
         self.height, self.width = int(height), int(width)
-        t = np.asarray(t, dtype=np.int64)
-        q = np.asarray(y, dtype=np.int64) * width + np.asarray(x, dtype=np.int64)
-        keep = (t >= start) & (t < end)
-        if mask is not None:
-            keep &= ~np.asarray(mask, dtype=bool).reshape(-1)[q]
-        q, t, p = q[keep], t[keep], np.asarray(p, dtype=np.int64)[keep]
+        q, t, p = exposure_events(x, y, t, p, start, end, width, mask)
         self.n_events = int(q.shape[0])
         duration = max(int(end) - int(start), 1)
         order = np.argsort(q, kind="stable")  # events stay time-ordered within each pixel

@@ -315,7 +315,7 @@ def _per_pixel_thresholds(
         a, b = int(slices[v, 0]), int(slices[v, 1])
         ints.append(cal.PolarityIntegral(ev.x[a:b], ev.y[a:b], ev.t[a:b], ev.p[a:b], exp[v, 0], exp[v, 1], h, w, hot))
     # events from start_v to start_{v+1} (the exposure and the gap); the starts must increase for the binning
-    n_pos, n_neg = cal.polarity_counts(ev.x, ev.y, ev.t, ev.p, exp[:, 0], h, w, hot)
+    n_pos, n_neg = binning.polarity_counts(ev.x, ev.y, ev.t, ev.p, exp[:, 0], h, w, hot)
     bsat = [cal.log_luma_and_sigma(frames.blurry[v], scene.camera_response) for v in range(v_n)]
     b, sigma_b, sat = (np.stack(z) for z in zip(*bsat, strict=True))
     res = cal.calibrate(b, sigma_b, sat, ints, n_pos, n_neg, gaps, c0, mask=hot)
