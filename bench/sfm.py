@@ -158,10 +158,11 @@ def main() -> None:
                 fmt(tm.get("mapping")), f"{dt:.0f}", rep.get("models_note", ""),
             ])  # fmt: skip
             print(scaling_rows[-1], flush=True)
+        main_row = {x[0]: x for x in rows}
         for r in time_rows:
             if r[0] == args.scaling_scene and r[1] == "latent":
-                scaling_rows.append([r[0], args.bins, r[2], rows[[x[0] for x in rows].index(r[0])][1].split(" ")[0],
-                                     rows[[x[0] for x in rows].index(r[0])][2], fmt(r[3]), fmt(r[4]), fmt(r[5]),
+                m = main_row[r[0]]  # registered "a/b (c %)", ATE %
+                scaling_rows.append([r[0], args.bins, r[2], m[1].split(" ")[0], m[2], fmt(r[3]), fmt(r[4]), fmt(r[5]),
                                      f"{r[6]:.0f}", ""])  # fmt: skip
         scaling_rows.sort(key=lambda r: r[1])
 

@@ -31,7 +31,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from eigs.events.edi import EXP_CLIP, LOG_EPS, exposure_events, luma, srgb_to_linear
+from eigs.events.binning import polarity_counts
+from eigs.events.edi import EXP_CLIP, LOG_EPS, exposure_events, luma, pixel_segments, srgb_to_linear
 
 log = logging.getLogger(__name__)
 
@@ -56,41 +57,24 @@ class PolarityIntegral:
     def __init__(self, x, y, t, p, start: int, end: int, height: int, width: int, mask=None):
         self.height, self.width = int(height), int(width)
         q, t, p = exposure_events(x, y, t, p, start, end, width, mask)
-        duration = max(int(end) - int(start), 1)
-        order = np.argsort(q, kind="stable")
-        qs, ts, on = q[order], t[order], (p[order] > 0)
-        n = qs.shape[0]
-        self.n_events = int(n)
-        if n == 0:
+        self.n_events = int(q.shape[0])
+        seg = pixel_segments(q, t, start, end)
+        if seg is None:
             self.pix = np.zeros(0, np.int64)
             return
-        new = np.ones(n, dtype=bool)
-        new[1:] = qs[1:] != qs[:-1]
-        gstart = np.flatnonzero(new)
-        g = gstart.shape[0]
-        gid = np.cumsum(new) - 1
-        glen = np.diff(np.append(gstart, n))
+        order, gstart, gid, seg_init, seg_evt, dur, seg_len = seg
+        on = p[order] > 0
         cpos = np.cumsum(on.astype(np.int64))
         cneg = np.cumsum((~on).astype(np.int64))
-        after_pos = cpos - (cpos[gstart] - on[gstart])[gid]
-        after_neg = cneg - (cneg[gstart] - (~on[gstart]))[gid]
-        pos_init = gstart + np.arange(g)
-        pos_evt = np.arange(n) + gid + 1
-        npos = np.zeros(n + g, np.int32)
-        nneg = np.zeros(n + g, np.int32)
-        dur = np.empty(n + g, np.int64)
-        npos[pos_evt] = after_pos
-        nneg[pos_evt] = after_neg
-        nxt = np.empty(n, np.int64)
-        nxt[:-1] = ts[1:]
-        nxt[np.append(gstart[1:] - 1, n - 1)] = end
-        dur[pos_evt] = nxt - ts
-        dur[pos_init] = ts[gstart] - start
-        self.pix = qs[gstart]
-        self.seg_start = pos_init
+        npos = np.zeros(dur.shape[0], np.int32)
+        nneg = np.zeros(dur.shape[0], np.int32)
+        npos[seg_evt] = cpos - (cpos[gstart] - on[gstart])[gid]  # counts from the start up to and including
+        nneg[seg_evt] = cneg - (cneg[gstart] - (~on[gstart]))[gid]
+        self.pix = q[order][gstart]
+        self.seg_start = seg_init
         self.seg_pos, self.seg_neg = npos, nneg
-        self.seg_w = dur.astype(np.float64) / duration
-        self._rep = glen + 1
+        self.seg_w = dur.astype(np.float64) / max(int(end) - int(start), 1)
+        self._rep = seg_len
         self._seg_pix = np.repeat(self.pix, self._rep)
 
     def log_mean_exp(self, c_pos: np.ndarray, c_neg: np.ndarray, grad: bool = False):
@@ -118,20 +102,15 @@ class PolarityIntegral:
 
 
 def counts_before(x, y, t, p, start: int, times: np.ndarray, height: int, width: int, mask=None):
-    """(ON, OFF) counts of the events with ``start`` ≤ t < times[k], for each k: two (L, H, W) float64."""
+    """(ON, OFF) counts of the events with ``start`` ≤ t < times[k], for each k: two (L, H, W) float64.
+    ``times``: (L,) strictly increasing, times[0] ≥ ``start``."""
     times = np.asarray(times, dtype=np.int64)
-    n_t = times.shape[0]
-    t = np.asarray(t, dtype=np.int64)
-    j = np.searchsorted(times, t, side="right")  # event counts in S_k for every k ≥ j
-    keep = (t >= start) & (j < n_t)
-    pix = np.asarray(y, dtype=np.int64) * width + np.asarray(x, dtype=np.int64)
-    if mask is not None:
-        keep &= ~np.asarray(mask, dtype=bool).reshape(-1)[pix]
-    idx = j[keep] * (height * width) + pix[keep]
-    pol = np.asarray(p)[keep]
-    n = n_t * height * width
-    on = np.bincount(idx[pol > 0], minlength=n).reshape(n_t, height, width)
-    off = np.bincount(idx[pol < 0], minlength=n).reshape(n_t, height, width)
+    if times[0] > start:  # a first bin [start, times[0])
+        on, off = polarity_counts(x, y, t, p, np.concatenate([[start], times]), height, width, mask)
+    else:  # nothing before times[0] = start
+        on, off = polarity_counts(x, y, t, p, times, height, width, mask)
+        zero = np.zeros((1, height, width), np.int64)
+        on, off = np.concatenate([zero, on]), np.concatenate([zero, off])
     return np.cumsum(on, axis=0).astype(np.float64), np.cumsum(off, axis=0).astype(np.float64)
 
 

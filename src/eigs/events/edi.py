@@ -118,6 +118,38 @@ def exposure_events(x, y, t, p, start: int, end: int, width: int, mask=None) -> 
     return q[keep], t[keep], np.asarray(p, dtype=np.int64)[keep]
 
 
+def pixel_segments(q: np.ndarray, t: np.ndarray, start: int, end: int) -> tuple[np.ndarray, ...] | None:
+    """Group one exposure's events by pixel into the segments on which a pixel's event count is constant.
+
+    ``q``, ``t``: (N,) flat pixel index and time (time-sorted) of events inside [start, end). Per active pixel
+    j (G of them) the segments are [start, first event) and then [event i, next event of the pixel or end) for
+    each of its events: N + G segments, a pixel's contiguous, the pixels in ascending q. Returns None without
+    events, else ``order`` (N,) (events sorted by pixel, time order kept), ``gstart`` (G,) first sorted event of
+    each pixel, ``gid`` (N,) pixel group of each sorted event, ``seg_init`` (G,) index of each pixel's first
+    segment, ``seg_evt`` (N,) index of the segment starting at each sorted event, ``duration`` (N + G,) int64
+    segment lengths (µs), ``seg_len`` (G,) segments per pixel."""
+    order = np.argsort(q, kind="stable")  # events stay time-ordered within each pixel
+    qs, ts = q[order], t[order]
+    n = qs.shape[0]
+    if n == 0:
+        return None
+    new = np.ones(n, dtype=bool)
+    new[1:] = qs[1:] != qs[:-1]
+    gstart = np.flatnonzero(new)
+    g = gstart.shape[0]
+    gid = np.cumsum(new) - 1
+    seg_init = gstart + np.arange(g)
+    seg_evt = np.arange(n) + gid + 1
+    nxt = np.empty(n, np.int64)
+    nxt[:-1] = ts[1:]
+    nxt[np.append(gstart[1:] - 1, n - 1)] = end
+    duration = np.empty(n + g, np.int64)
+    duration[seg_evt] = nxt - ts
+    duration[seg_init] = ts[gstart] - start
+    seg_len = np.diff(np.append(gstart, n)) + 1
+    return order, gstart, gid, seg_init, seg_evt, duration, seg_len
+
+
 class ExposureIntegral:
     """The exact per-pixel event integral of one exposure, for the continuous-time double integral.
 
@@ -149,44 +181,27 @@ class ExposureIntegral:
         self.height, self.width = int(height), int(width)
         q, t, p = exposure_events(x, y, t, p, start, end, width, mask)
         self.n_events = int(q.shape[0])
-        duration = max(int(end) - int(start), 1)
-        order = np.argsort(q, kind="stable")  # events stay time-ordered within each pixel
-        qs, ts, ps = q[order], t[order], p[order]
-        n = qs.shape[0]
-        if n == 0:
+        seg = pixel_segments(q, t, start, end)
+        if seg is None:
             self.pix = np.zeros(0, np.int64)
             self.seg_start = np.zeros(0, np.int64)
             self.seg_val = np.zeros(0, np.float64)
             self.seg_w = np.zeros(0, np.float64)
             self._rep = np.zeros(0, np.int64)
             return
-        new = np.ones(n, dtype=bool)
-        new[1:] = qs[1:] != qs[:-1]
-        gstart = np.flatnonzero(new)  # (G,) first event of each active pixel
-        g = gstart.shape[0]
-        gid = np.cumsum(new) - 1  # (N,) group of each event
-        glen = np.diff(np.append(gstart, n))
+        order, gstart, gid, seg_init, seg_evt, dur, seg_len = seg
+        ts, ps = t[order], p[order]
         cs = np.cumsum(ps)
         after = cs - (cs[gstart] - ps[gstart])[gid]  # count from exposure start up to and including the event
         before_ref = np.add.reduceat(np.where(ts < t_ref, ps, 0), gstart)  # (G,) E at t_ref from the start
-        # segments of group j: [start, first event) then [event i, next event or end) for each event
-        pos_init = gstart + np.arange(g)
-        pos_evt = np.arange(n) + gid + 1
-        val = np.empty(n + g, np.int64)
-        dur = np.empty(n + g, np.int64)
-        val[pos_init] = 0
-        val[pos_evt] = after
-        nxt = np.empty(n, np.int64)
-        nxt[:-1] = ts[1:]
-        nxt[np.append(gstart[1:] - 1, n - 1)] = end
-        dur[pos_evt] = nxt - ts
-        dur[pos_init] = ts[gstart] - start
-        seg_len = glen + 1
+        val = np.empty(dur.shape[0], np.int64)
+        val[seg_init] = 0
+        val[seg_evt] = after
         val -= np.repeat(before_ref, seg_len)
-        self.pix = qs[gstart]
-        self.seg_start = pos_init
+        self.pix = q[order][gstart]
+        self.seg_start = seg_init
         self.seg_val = val.astype(np.float64)
-        self.seg_w = dur.astype(np.float64) / duration
+        self.seg_w = dur.astype(np.float64) / max(int(end) - int(start), 1)
         self._rep = seg_len
 
     def log_mean_exp(self, c: float) -> np.ndarray:

@@ -230,7 +230,7 @@ def compute_edi(scene: Scene, opts: EdiOptions, path: str = "") -> EdiResult:
     maps = None
     if mode == "estimated" and opts.per_pixel_threshold:
         maps = _per_pixel_thresholds(scene, opts, thresholds, slices, hot, active)
-    pol_ints: dict[int, cal.PolarityIntegral] = maps[2] if maps is not None else {}
+    c_pos_map, c_neg_map, pol_ints = maps if maps is not None else (None, None, {})
 
     # ---- latent frames
     latent = np.empty((v_n, bins + 1, h, w, ch), np.float32)
@@ -247,8 +247,8 @@ def compute_edi(scene: Scene, opts: EdiOptions, path: str = "") -> EdiResult:
             lat = edi_e2nerf(blurry[v], cum[v], c)
             latent[v] = (np.clip(lat, 0.0, 255.0) / 255.0).astype(np.float32)
         else:
-            if maps is not None and v in pol_ints:
-                lat = _latent_per_pixel(scene, v, times[v], lin[v], pol_ints[v], maps[0], maps[1], slices, hot)
+            if v in pol_ints:
+                lat = _latent_per_pixel(scene, v, times[v], lin[v], pol_ints[v], c_pos_map, c_neg_map, slices, hot)
             elif integrals[v] is not None:
                 lat = edi_continuous(lin[v], cum[v], integrals[v].log_mean_exp(c), c)
             else:
@@ -268,8 +268,8 @@ def compute_edi(scene: Scene, opts: EdiOptions, path: str = "") -> EdiResult:
         threshold_scope=scope,
         scene_name=scene.name,
         event_mask=hot,
-        threshold_pos_map=maps[0] if maps is not None else None,
-        threshold_neg_map=maps[1] if maps is not None else None,
+        threshold_pos_map=c_pos_map,
+        threshold_neg_map=c_neg_map,
     )
 
 

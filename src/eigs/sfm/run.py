@@ -134,6 +134,7 @@ def run_sfm(
     log.info("mode: %s (%s); %d views × %d latent frames", mode, reason, V, L)
     slots = [(v, k) for v in range(V) for k in (range(1) if edi.sharp[v] else range(L))]
     names = [latent_png_name(v, k) for v, k in slots]
+    view_of_name = {n: v for (v, _k), n in zip(slots, names, strict=True)}
     report: dict = {
         "scene": scene.name,
         "mode": mode,
@@ -183,7 +184,7 @@ def run_sfm(
             with timer("matching (epipolar-guided, known poses)"):
                 from eigs.sfm.given import guided_match
 
-                view_of = {name_to_id[n]: v for (v, _k), n in zip(slots, names, strict=True)}
+                view_of = {name_to_id[n]: v for n, v in view_of_name.items()}
                 report["matcher"] = "epipolar-guided"
                 report["guided_matching"] = guided_match(
                     db, {name_to_id[n]: c for n, c in c2w_by_name.items()}, view_of, max_epipolar_px=4.0 * px
@@ -225,11 +226,7 @@ def run_sfm(
             from eigs.sfm.outliers import reject_sibling_outliers
 
             with timer("sibling check"):
-                rejected = reject_sibling_outliers(
-                    rec,
-                    {n: v for (v, _k), n in zip(slots, names, strict=True)},
-                    refine_intrinsics=opts.refine_intrinsics,
-                )
+                rejected = reject_sibling_outliers(rec, view_of_name, refine_intrinsics=opts.refine_intrinsics)
             if res.lost_to_other_models:
                 report["models_note"] = (
                     f"COLMAP split the scene into {len(res.model_sizes)} models; the largest "
@@ -286,7 +283,7 @@ def run_sfm(
             log.warning("%d unregistered latent frames interpolated within their view", int(interpolated.sum()))
         if no_pose:
             log.warning("views without a pose for every latent: %s", no_pose)
-        removed = _drop_single_view_points(rec, {n: v for (v, _k), n in zip(slots, names, strict=True)})
+        removed = _drop_single_view_points(rec, view_of_name)
         if removed:
             log.info("removed %d points seen from one training view only (intra-exposure baseline)", removed)
         report["points"] = {

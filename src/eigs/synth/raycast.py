@@ -51,6 +51,12 @@ class Material:
     offset: tuple[float, float] = (0.0, 0.0)
 
 
+def material_albedo(m: Material, size: int, floor: float) -> np.ndarray:
+    """(S, S, 3) float32 linear albedo ``tint · (floor + (1 − floor) · texture)`` of material ``m``, S = ``size``."""
+    tex = floor + (1 - floor) * load_texture(m.texture, size, m.crop)
+    return (tex * np.asarray(m.tint, F32)).astype(F32)
+
+
 Vec = tuple[np.ndarray, np.ndarray, np.ndarray]  # structure-of-arrays 3-vectors, each (M,) float32
 
 
@@ -76,10 +82,8 @@ class Primitive(ABC):
         """Radius of a sphere about ``center`` that contains the solid (world units)."""
 
     def albedo(self, size: int, floor: float) -> np.ndarray:
-        """(S, S, 3) float32 linear albedo texture: ``tint · (floor + (1 − floor) · texture)``, S = ``size``."""
-        m = self.material
-        tex = floor + (1 - floor) * load_texture(m.texture, size, m.crop)
-        return (tex * np.asarray(m.tint, F32)).astype(F32)
+        """(S, S, 3) float32 linear albedo texture of the material, S = ``size`` (:func:`material_albedo`)."""
+        return material_albedo(self.material, size, floor)
 
 
 def _pick_t(t0: np.ndarray, t1: np.ndarray, ok: np.ndarray) -> np.ndarray:
@@ -191,8 +195,7 @@ class Patchwork(Primitive):
         atlas = np.empty((n * size, n * size, 3), F32)
         for idx, m in enumerate(self.cells):
             i, j = divmod(idx, n)
-            tex = floor + (1 - floor) * load_texture(m.texture, size, m.crop)
-            atlas[j * size : (j + 1) * size, i * size : (i + 1) * size] = tex * np.asarray(m.tint, F32)
+            atlas[j * size : (j + 1) * size, i * size : (i + 1) * size] = material_albedo(m, size, floor)
         return atlas
 
 
