@@ -181,3 +181,36 @@ def test_bad_arguments_raise() -> None:
     bad_k[0, 0] = math.nan
     with pytest.raises(ValueError, match="finite"):
         rasterize(*args[:6], bad_k, *args[7:])
+
+
+def test_double_backward_raises() -> None:
+    # The C++ Functions are once-differentiable: differentiating a gradient must raise, not act as a constant.
+    scene = random_scene(30, 24, 20, seed=2).to(torch.float64, grad=True)
+    image, alpha, _ = rasterize(*scene.args())
+    (g_means,) = torch.autograd.grad((image.sum() + alpha.sum(),), (scene.means,), create_graph=True)
+    assert g_means.requires_grad  # under create_graph the gradient carries the error node
+    with pytest.raises(RuntimeError, match="not differentiable"):
+        g_means.sum().backward()
+
+
+def test_backward_rejects_binning_that_does_not_match() -> None:
+    # The backward groups pair slots by Gaussian from means2d/extents; a binning made from other extents must be
+    # refused with a clear error instead of writing out of bounds.
+    from eigs.render import _backend
+    from eigs.render._wrapper import camera_list
+
+    C = _backend.load()
+    scene = random_scene(50, 40, 30, seed=3)
+    means, quats, scales, opac, colors, viewmat, K, W, H, bg = scene.args()
+    cam = camera_list(viewmat, K, means.dtype)
+    m2, con, dep, ext, radii = C.project_fwd(means, quats, scales, opac, colors, cam, W, H)
+    offs, ids = C.isect_tiles(m2, ext, dep, radii, W, H)
+    image, alpha, trans, last = C.rasterize_fwd(m2, con, colors, opac, ext, bg, offs, ids, W, H, 0)
+    v_image, v_alpha = torch.ones_like(image), torch.ones_like(alpha)
+    with pytest.raises(RuntimeError, match="binning does not match"):
+        C.rasterize_bwd(m2, con, colors, opac, ext * 3, bg, offs, ids, W, H, trans, last, v_image, v_alpha, 0)
+    # the same number of pairs, but binned one tile to the right of where means2d puts them
+    shifted = m2 + torch.tensor([16.0, 0.0])
+    offs2, ids2 = C.isect_tiles(shifted, ext, dep, radii, W, H)
+    with pytest.raises(RuntimeError, match="binning does not match"):
+        C.rasterize_bwd(m2, con, colors, opac, ext, bg, offs2, ids2, W, H, trans, last, v_image, v_alpha, 0)

@@ -21,9 +21,15 @@ Backend = Literal["auto", "cpu", "gsplat"]
 def _check(name: str, t: Tensor, shape: tuple[int | None, ...]) -> None:
     if not isinstance(t, Tensor):
         raise TypeError(f"{name} must be a torch.Tensor, got {type(t).__name__}")
-    if t.dim() != len(shape) or any(s is not None and s != n for s, n in zip(shape, t.shape, strict=True)):
+    got = t.shape
+    ok = len(got) == len(shape)
+    if ok:
+        for s, n in zip(shape, got, strict=True):  # a plain loop: this runs 8 times per call (per-call latency matters)
+            if s is not None and s != n:
+                ok = False
+    if not ok:
         want = "(" + ", ".join("*" if s is None else str(s) for s in shape) + ")"
-        raise ValueError(f"{name} must have shape {want}, got {tuple(t.shape)}")
+        raise ValueError(f"{name} must have shape {want}, got {tuple(got)}")
 
 
 def rasterize(
@@ -89,10 +95,11 @@ def rasterize(
         raise TypeError(f"background must be {dtype} on {device} like means")
     viewmat = viewmat.detach().to(device=device, dtype=dtype)
     K = K.detach().to(device=device, dtype=dtype)
-    # One host copy of the 25 camera numbers instead of a chain of small tensor ops (per-call latency); the
-    # cpu backend takes them as this list.
-    cam = torch.cat((viewmat.reshape(-1), K.reshape(-1))).tolist()
-    if not all(math.isfinite(v) for v in cam):
+    # The 25 camera numbers as one host list (the cpu backend takes them so): two .tolist() calls are cheaper
+    # than any chain of small tensor ops (per-call latency).
+    vm, k = viewmat.tolist(), K.tolist()
+    cam = vm[0] + vm[1] + vm[2] + vm[3] + k[0] + k[1] + k[2]
+    if not all(map(math.isfinite, cam)):
         raise ValueError("viewmat and K must be finite")
     if not (cam[16] > 0 and cam[20] > 0):
         raise ValueError("K must have positive focal lengths fx, fy")

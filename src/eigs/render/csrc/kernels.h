@@ -1,4 +1,4 @@
-// Plain C++ entry points of the rasterizer kernels (no torch headers: ext.cpp wraps them for Python).
+// Plain C++ entry points of the rasterizer kernels (no torch headers: ops.cpp wraps them for Python).
 // All arrays are dense, row-major, of scalar type S (float or double) unless stated otherwise.
 #pragma once
 
@@ -66,10 +66,11 @@ void rasterize_forward(const S* means2d, const S* conics, const S* colors, const
                        int32_t* last, int nthreads, int isa);
 
 // Backward compositing.  v_image (H,W,D), v_alpha (H,W) -> per-pair gradients pair_grads (n_isects, 6 + D)
-// in the order (v_mean2d x, y, v_conic a, b, c, v_opacity, v_color...), then reduced in isect order (a fixed
-// order: deterministic for any thread count) into v_means2d (N,2), v_conics (N,3), v_opacities (N),
-// v_colors (N,D) (overwritten: each reducing thread zeroes its own Gaussians first); v_background (D) = sum over pixels of T_final v_image, summed
-// per tile (row-major pixels) and then over tiles in tile order (deterministic too).
+// in the order (v_mean2d x, y, v_conic a, b, c, v_opacity, v_color...), stored grouped by Gaussian (its tiles in
+// row-major order, i.e. its isect order), then summed per Gaussian in that fixed order (deterministic for any
+// thread count) into v_means2d (N,2), v_conics (N,3), v_opacities (N), v_colors (N,D) (overwritten);
+// v_background (D) = sum over pixels of T_final v_image, summed per tile (row-major pixels) and then over tiles
+// in tile order (deterministic too).  Throws std::runtime_error if the binning does not match means2d/extents.
 template <typename S>
 void rasterize_backward(int64_t n, const S* means2d, const S* conics, const S* colors, const S* opacities,
                         const S* extents, const S* background, int64_t d, int64_t width, int64_t height,

@@ -1,5 +1,5 @@
 // Projection of 3-D Gaussians to 2-D (EWA splatting, gsplat's asymmetric clamp) and its VJP; tile binning.
-// Semantics: docs/rasterizer.md.  No torch headers here: ext.cpp wraps these functions.
+// Semantics: docs/rasterizer.md.  No torch headers here: ops.cpp wraps these functions.
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -10,6 +10,7 @@
 
 #include "kernels.h"
 #include "pair_math.h"
+#include "tile_geom.h"
 
 namespace eigs {
 namespace {
@@ -145,21 +146,6 @@ bool project_one(const S* mean, const S* quat, const S* scale, S opacity, const 
         if (!finite(p.conic[k])) return false;
     if (!finite(p.mean2d[0]) || !finite(p.mean2d[1])) return false;
     return true;
-}
-
-// Pixel-index range [lo, hi] of pixel centres k + 0.5 inside [c - r, c + r], clamped to [0, size - 1];
-// lo > hi when empty.  Computed in double so that large coordinates cannot overflow an int.
-inline void pixel_range(double c, double r, int64_t size, int64_t& lo, int64_t& hi) {
-    double a = std::ceil(c - r - 0.5), b = std::floor(c + r - 0.5);
-    a = std::max(a, 0.0);
-    b = std::min(b, double(size - 1));
-    if (!(a <= b)) {
-        lo = 1;
-        hi = 0;
-        return;
-    }
-    lo = int64_t(a);
-    hi = int64_t(b);
 }
 
 }  // namespace
@@ -369,15 +355,7 @@ int64_t isect_plan(int64_t n, const S* means2d, const S* extents, const S* depth
                 int32_t* r = rect + 4 * g;
                 r[0] = r[2] = 1;
                 r[1] = r[3] = 0;
-                if (radii[2 * g] <= 0) continue;
-                int64_t j0, j1, i0, i1;
-                pixel_range(double(means2d[2 * g]), double(extents[2 * g]), width, j0, j1);
-                pixel_range(double(means2d[2 * g + 1]), double(extents[2 * g + 1]), height, i0, i1);
-                if (j0 > j1 || i0 > i1) continue;
-                r[0] = int32_t(j0 / kTile);
-                r[1] = int32_t(j1 / kTile);
-                r[2] = int32_t(i0 / kTile);
-                r[3] = int32_t(i1 / kTile);
+                if (radii[2 * g] <= 0 || !tile_rect(means2d + 2 * g, extents + 2 * g, width, height, r)) continue;
                 keys[lo + m] = Key{depths[g], g};
                 ++m;
             }

@@ -1,16 +1,23 @@
 // Backward compositing: per tile, the tile's Gaussian list back to front, one tile row per vector.
 // Rebuilds the transmittance in front of each Gaussian with T <- T / max(1e-6, 1 - alpha), starting from the
 // forward's final T, and the colour composited behind it with S <- alpha c + (1 - alpha) S.  Per-lane
-// accumulators are reduced once per (tile, Gaussian) into that pair's slot; the pairs are then summed per
-// Gaussian in isect order, so the result does not depend on the thread count or schedule (no atomics).
+// accumulators are reduced once per (tile, Gaussian) into that pair's slot.  The slots are grouped by Gaussian
+// (each Gaussian's tiles in row-major order, which is its isect order), so the final per-Gaussian sums run in
+// parallel over Gaussians, each over a contiguous range in a fixed order: the result does not depend on the
+// thread count or schedule (no atomics).
 #include <algorithm>
+#include <atomic>
 #include <cstdint>
+#include <memory>
+#include <stdexcept>
+#include <string>
 #include <vector>
 
 #include <omp.h>
 
 #include "kernels.h"
 #include "raster_common.h"
+#include "tile_geom.h"
 
 namespace eigs {
 namespace {
@@ -23,6 +30,9 @@ struct BwdCtx {
     const S* trans;
     const int32_t* last;
     const S *v_image, *v_alpha;
+    const int32_t* rect;   // (N, 4) tile rectangle of each Gaussian (as binned)
+    const int64_t* slot0;  // (N + 1) first pair slot of each Gaussian
+    std::atomic<bool>* mismatch;  // set when a Gaussian is binned to a tile outside its rectangle
     S *pair_grads, *tile_bg;  // tile_bg (n_tiles, D): per tile, sum over its pixels of T_final v_image
 };
 
@@ -91,14 +101,21 @@ EIGS_INLINE void bwd_tile(const BwdCtx<S>& A, int64_t tile, BwdScratch<S>& ws) {
     }
     S px[kTile];
     for (int l = 0; l < kTile; ++l) px[l] = S(tg.x0 + l) + S(0.5);
+    const int32_t tx = int32_t(tg.x0 / kTile), ty = int32_t(tg.y0 / kTile);
 
     for (int64_t k = count - 1; k >= 0; --k) {
-        S* __restrict__ out = A.pair_grads + (start + k) * P;
+        const int64_t g = A.flatten_ids[start + k];
+        const int32_t* rc = A.rect + 4 * g;
+        if (tx < rc[0] || tx > rc[1] || ty < rc[2] || ty > rc[3]) {  // binning inconsistent with the rects
+            A.mismatch->store(true, std::memory_order_relaxed);
+            continue;
+        }
+        const int64_t slot = A.slot0[g] + int64_t(ty - rc[2]) * (rc[1] - rc[0] + 1) + (tx - rc[0]);
+        S* __restrict__ out = A.pair_grads + slot * P;
         if (k > tile_max_last) {
             std::fill(out, out + P, S(0));
             continue;
         }
-        const int64_t g = A.flatten_ids[start + k];
         const S mx = A.means2d[2 * g], my = A.means2d[2 * g + 1];
         const S ca = A.conics[3 * g], cb = A.conics[3 * g + 1], cc = A.conics[3 * g + 2];
         const S op = A.opacities[g];
@@ -215,14 +232,41 @@ void rasterize_backward(int64_t n, const S* means2d, const S* conics, const S* c
                         S* v_means2d, S* v_conics, S* v_opacities, S* v_colors, S* v_background, int nthreads,
                         int isa) {
     const int64_t n_tiles = ((width + kTile - 1) / kTile) * ((height + kTile - 1) / kTile);
-    std::vector<S> tile_bg(size_t(n_tiles * d));
-    const BwdCtx<S> A{means2d,     conics, colors,  opacities, extents,    background, d,
-                      width,       height, tile_offsets, flatten_ids, trans, last, v_image,
-                      v_alpha,     pair_grads, tile_bg.data()};
-    const BwdFn<S> fn = pick_bwd(means2d, d, resolve_isa(isa));
-    const std::vector<int64_t> order = tile_schedule(tile_offsets, n_tiles, nthreads);
     const int64_t n_isects = tile_offsets[n_tiles];
     const int64_t P = 6 + d;
+    // Pair slots grouped by Gaussian: slot0[g] = sum of the tile counts of the Gaussians before g.
+    const size_t n1 = size_t(std::max<int64_t>(n, 1));
+    std::unique_ptr<int32_t[]> rect(new int32_t[4 * n1]);
+    std::unique_ptr<int64_t[]> slot0(new int64_t[n1 + 1]);
+    std::vector<int64_t> chunk(size_t(nthreads) + 1, 0);
+#pragma omp parallel num_threads(nthreads)
+    {
+        const int nt = omp_get_num_threads(), tid = omp_get_thread_num();
+        const int64_t lo = n * tid / nt, hi = n * (tid + 1) / nt;
+        int64_t run = 0;
+        for (int64_t g = lo; g < hi; ++g) {
+            int32_t* r = rect.get() + 4 * g;
+            slot0[g] = run;
+            if (tile_rect(means2d + 2 * g, extents + 2 * g, width, height, r))
+                run += int64_t(r[1] - r[0] + 1) * int64_t(r[3] - r[2] + 1);
+        }
+        chunk[size_t(tid) + 1] = run;
+#pragma omp barrier
+        int64_t base = 0;
+        for (int c = 0; c < tid; ++c) base += chunk[size_t(c) + 1];
+        for (int64_t g = lo; g < hi; ++g) slot0[g] += base;
+        if (tid == nt - 1) slot0[n] = base + run;
+    }
+    if (slot0[n] != n_isects)
+        throw std::runtime_error("rasterize_backward: the tile binning does not match means2d/extents (" +
+                                 std::to_string(slot0[n]) + " vs " + std::to_string(n_isects) + " pairs)");
+    std::vector<S> tile_bg(size_t(n_tiles * d));
+    std::atomic<bool> mismatch{false};
+    const BwdCtx<S> A{means2d,      conics,      colors, opacities, extents, background, d,
+                      width,        height,      tile_offsets, flatten_ids, trans, last, v_image,
+                      v_alpha,      rect.get(),  slot0.get(), &mismatch, pair_grads, tile_bg.data()};
+    const BwdFn<S> fn = pick_bwd(means2d, d, resolve_isa(isa));
+    const std::vector<int64_t> order = tile_schedule(tile_offsets, n_tiles, nthreads);
 #pragma omp parallel num_threads(nthreads)
     {
         {
@@ -230,28 +274,36 @@ void rasterize_backward(int64_t n, const S* means2d, const S* conics, const S* c
 #pragma omp for schedule(dynamic, 1)
             for (int64_t t = 0; t < n_tiles; ++t) fn(A, order[size_t(t)], ws);
         }
-        // Reduction of the per-pair gradients into per-Gaussian gradients, each Gaussian's pairs summed in isect
-        // order (a fixed order).  Thread i owns the Gaussians of id range i and scans all pairs: every sum is
-        // the same for any thread count.
-        const int nt = omp_get_num_threads(), tid = omp_get_thread_num();
-        const int64_t lo = n * tid / nt, hi = n * (tid + 1) / nt;
-        std::fill(v_means2d + 2 * lo, v_means2d + 2 * hi, S(0));
-        std::fill(v_conics + 3 * lo, v_conics + 3 * hi, S(0));
-        std::fill(v_opacities + lo, v_opacities + hi, S(0));
-        std::fill(v_colors + d * lo, v_colors + d * hi, S(0));
-        for (int64_t i = 0; i < n_isects; ++i) {
-            const int64_t g = flatten_ids[i];
-            if (g < lo || g >= hi) continue;
-            const S* pg = pair_grads + i * P;
-            v_means2d[2 * g] += pg[0];
-            v_means2d[2 * g + 1] += pg[1];
-            v_conics[3 * g] += pg[2];
-            v_conics[3 * g + 1] += pg[3];
-            v_conics[3 * g + 2] += pg[4];
-            v_opacities[g] += pg[5];
-            for (int64_t ch = 0; ch < d; ++ch) v_colors[g * d + ch] += pg[6 + ch];
+        // Per-Gaussian sums over its contiguous slots, in slot order (= its isect order): parallel over
+        // Gaussians, the same sums for any thread count.
+#pragma omp for schedule(static)
+        for (int64_t g = 0; g < n; ++g) {
+            S m0 = S(0), m1 = S(0), c0 = S(0), c1 = S(0), c2 = S(0), o = S(0);
+            for (int64_t sl = slot0[g]; sl < slot0[g + 1]; ++sl) {
+                const S* pg = pair_grads + sl * P;
+                m0 += pg[0];
+                m1 += pg[1];
+                c0 += pg[2];
+                c1 += pg[3];
+                c2 += pg[4];
+                o += pg[5];
+            }
+            v_means2d[2 * g] = m0;
+            v_means2d[2 * g + 1] = m1;
+            v_conics[3 * g] = c0;
+            v_conics[3 * g + 1] = c1;
+            v_conics[3 * g + 2] = c2;
+            v_opacities[g] = o;
+            for (int64_t ch = 0; ch < d; ++ch) {
+                S c = S(0);
+                for (int64_t sl = slot0[g]; sl < slot0[g + 1]; ++sl) c += pair_grads[sl * P + 6 + ch];
+                v_colors[g * d + ch] = c;
+            }
         }
     }
+    if (mismatch.load())
+        throw std::runtime_error("rasterize_backward: the tile binning does not match means2d/extents (a "
+                                 "Gaussian binned to a tile outside its box)");
     for (int64_t ch = 0; ch < d; ++ch) v_background[ch] = S(0);
     for (int64_t t = 0; t < n_tiles; ++t)
         for (int64_t ch = 0; ch < d; ++ch) v_background[ch] += tile_bg[size_t(t * d + ch)];

@@ -1,18 +1,19 @@
-// Python bindings of the rasterizer kernels (the only translation unit that includes torch headers).
-// Every function takes contiguous CPU tensors of one floating dtype (checked here) and returns new tensors.
-#include <torch/extension.h>
+// The kernels as checked tensor ops (declared in ops.h): every function takes contiguous CPU tensors of one
+// floating dtype (checked here) and returns new tensors.
+#include "ops.h"
 
+#include <ATen/Dispatch.h>
 #include <ATen/Parallel.h>
 
+#include <algorithm>
 #include <string>
 #include <tuple>
 #include <vector>
 
 #include "kernels.h"
 
+namespace eigs::ops {
 namespace {
-
-using torch::Tensor;
 
 void check(const Tensor& t, const char* name, at::ScalarType dtype) {
     TORCH_CHECK(t.device().is_cpu(), name, " must be a CPU tensor");
@@ -20,8 +21,6 @@ void check(const Tensor& t, const char* name, at::ScalarType dtype) {
     TORCH_CHECK(t.is_contiguous(), name, " must be contiguous");
 }
 
-// cam: the 16 entries of viewmat (row-major 4x4, world-to-camera) then the 9 of K (row-major 3x3), already
-// rounded to the tensors' dtype by the caller (a Python list: no small tensor ops per call).
 template <typename S>
 eigs::Camera<S> make_camera(const std::vector<double>& cam_in, int64_t width, int64_t height) {
     TORCH_CHECK(cam_in.size() == 25, "cam must hold the 16 viewmat and 9 K entries, got ", cam_in.size());
@@ -50,23 +49,26 @@ int threads(int64_t work, int64_t grain) {
 
 // Gaussians per thread below which projection (and its backward) and binning run on fewer threads.
 constexpr int64_t kProjectGrain = 256;
-constexpr int64_t kIsectGrain = 256;
+constexpr int64_t kIsectGrain = 1024;
 
 int64_t n_tiles_of(int64_t width, int64_t height) { return ((width + 15) / 16) * ((height + 15) / 16); }
 
-std::tuple<Tensor, Tensor, Tensor, Tensor, Tensor> project_fwd(Tensor means, Tensor quats, Tensor scales,
-                                                                Tensor opacities, Tensor colors,
-                                                                std::vector<double> cam_in, int64_t width,
+}  // namespace
+
+std::tuple<Tensor, Tensor, Tensor, Tensor, Tensor> project_fwd(const Tensor& means, const Tensor& quats,
+                                                                const Tensor& scales, const Tensor& opacities,
+                                                                const Tensor& colors,
+                                                                const std::vector<double>& cam_in, int64_t width,
                                                                 int64_t height) {
     const auto dt = means.scalar_type();
-    for (auto& [t, name] : {std::pair<Tensor&, const char*>{means, "means"}, {quats, "quats"},
+    for (const auto& [t, name] : {std::pair<const Tensor&, const char*>{means, "means"}, {quats, "quats"},
                             {scales, "scales"}, {opacities, "opacities"}, {colors, "colors"}})
         check(t, name, dt);
     const int64_t n = means.size(0);
     auto opt = means.options();
-    Tensor means2d = torch::empty({n, 2}, opt), conics = torch::empty({n, 3}, opt);
-    Tensor depths = torch::empty({n}, opt), extents = torch::empty({n, 2}, opt);
-    Tensor radii = torch::empty({n, 2}, opt.dtype(torch::kInt32));
+    Tensor means2d = at::empty({n, 2}, opt), conics = at::empty({n, 3}, opt);
+    Tensor depths = at::empty({n}, opt), extents = at::empty({n, 2}, opt);
+    Tensor radii = at::empty({n, 2}, opt.dtype(at::kInt));
     AT_DISPATCH_FLOATING_TYPES(dt, "project_fwd", [&] {
         const auto cam = make_camera<scalar_t>(cam_in, width, height);
         eigs::project_forward<scalar_t>(n, means.data_ptr<scalar_t>(), quats.data_ptr<scalar_t>(),
@@ -79,17 +81,18 @@ std::tuple<Tensor, Tensor, Tensor, Tensor, Tensor> project_fwd(Tensor means, Ten
     return {means2d, conics, depths, extents, radii};
 }
 
-std::tuple<Tensor, Tensor, Tensor> project_bwd(Tensor means, Tensor quats, Tensor scales,
-                                               std::vector<double> cam_in, int64_t width, int64_t height,
-                                               Tensor radii, Tensor v_means2d, Tensor v_conics) {
+std::tuple<Tensor, Tensor, Tensor> project_bwd(const Tensor& means, const Tensor& quats, const Tensor& scales,
+                                               const std::vector<double>& cam_in, int64_t width, int64_t height,
+                                               const Tensor& radii, const Tensor& v_means2d,
+                                               const Tensor& v_conics) {
     const auto dt = means.scalar_type();
-    for (auto& [t, name] : {std::pair<Tensor&, const char*>{means, "means"}, {quats, "quats"},
+    for (const auto& [t, name] : {std::pair<const Tensor&, const char*>{means, "means"}, {quats, "quats"},
                             {scales, "scales"}, {v_means2d, "v_means2d"}, {v_conics, "v_conics"}})
         check(t, name, dt);
-    check(radii, "radii", torch::kInt32);
+    check(radii, "radii", at::kInt);
     const int64_t n = means.size(0);
-    Tensor v_means = torch::empty({n, 3}, means.options()), v_quats = torch::empty({n, 4}, means.options());
-    Tensor v_scales = torch::empty({n, 3}, means.options());
+    Tensor v_means = at::empty({n, 3}, means.options()), v_quats = at::empty({n, 4}, means.options());
+    Tensor v_scales = at::empty({n, 3}, means.options());
     AT_DISPATCH_FLOATING_TYPES(dt, "project_bwd", [&] {
         const auto cam = make_camera<scalar_t>(cam_in, width, height);
         eigs::project_backward<scalar_t>(n, means.data_ptr<scalar_t>(), quats.data_ptr<scalar_t>(),
@@ -101,16 +104,16 @@ std::tuple<Tensor, Tensor, Tensor> project_bwd(Tensor means, Tensor quats, Tenso
     return {v_means, v_quats, v_scales};
 }
 
-std::tuple<Tensor, Tensor> isect_tiles(Tensor means2d, Tensor extents, Tensor depths, Tensor radii,
-                                       int64_t width, int64_t height) {
+std::tuple<Tensor, Tensor> isect_tiles(const Tensor& means2d, const Tensor& extents, const Tensor& depths,
+                                       const Tensor& radii, int64_t width, int64_t height) {
     const auto dt = means2d.scalar_type();
     check(means2d, "means2d", dt);
     check(extents, "extents", dt);
     check(depths, "depths", dt);
-    check(radii, "radii", torch::kInt32);
+    check(radii, "radii", at::kInt);
     const int64_t n = means2d.size(0);
     const int64_t n_tiles = ((width + 15) / 16) * ((height + 15) / 16);
-    Tensor offsets = torch::empty({n_tiles + 1}, means2d.options().dtype(torch::kInt64));
+    Tensor offsets = at::empty({n_tiles + 1}, means2d.options().dtype(at::kLong));
     eigs::IsectPlan plan;
     int64_t total = 0;
     AT_DISPATCH_FLOATING_TYPES(dt, "isect_tiles", [&] {
@@ -118,27 +121,28 @@ std::tuple<Tensor, Tensor> isect_tiles(Tensor means2d, Tensor extents, Tensor de
                                            depths.data_ptr<scalar_t>(), radii.data_ptr<int32_t>(), width, height,
                                            offsets.data_ptr<int64_t>(), plan, threads(n, kIsectGrain));
     });
-    Tensor ids = torch::empty({total}, means2d.options().dtype(torch::kInt64));
+    Tensor ids = at::empty({total}, means2d.options().dtype(at::kLong));
     eigs::isect_fill(plan, ids.data_ptr<int64_t>());
     return {offsets, ids};
 }
 
-std::tuple<Tensor, Tensor, Tensor, Tensor> rasterize_fwd(Tensor means2d, Tensor conics, Tensor colors,
-                                                 Tensor opacities, Tensor extents, Tensor background,
-                                                 Tensor tile_offsets, Tensor flatten_ids, int64_t width,
-                                                 int64_t height, int64_t isa) {
+std::tuple<Tensor, Tensor, Tensor, Tensor> rasterize_fwd(const Tensor& means2d, const Tensor& conics,
+                                                         const Tensor& colors, const Tensor& opacities,
+                                                         const Tensor& extents, const Tensor& background,
+                                                         const Tensor& tile_offsets, const Tensor& flatten_ids,
+                                                         int64_t width, int64_t height, int64_t isa) {
     const auto dt = means2d.scalar_type();
-    for (auto& [t, name] : {std::pair<Tensor&, const char*>{means2d, "means2d"}, {conics, "conics"},
+    for (const auto& [t, name] : {std::pair<const Tensor&, const char*>{means2d, "means2d"}, {conics, "conics"},
                             {colors, "colors"}, {opacities, "opacities"}, {extents, "extents"},
                             {background, "background"}})
         check(t, name, dt);
-    check(tile_offsets, "tile_offsets", torch::kInt64);
-    check(flatten_ids, "flatten_ids", torch::kInt64);
+    check(tile_offsets, "tile_offsets", at::kLong);
+    check(flatten_ids, "flatten_ids", at::kLong);
     const int64_t d = colors.size(1);
     auto opt = means2d.options();
-    Tensor image = torch::empty({height, width, d}, opt), alpha = torch::empty({height, width}, opt);
-    Tensor trans = torch::empty({height, width}, opt);
-    Tensor last = torch::empty({height, width}, opt.dtype(torch::kInt32));
+    Tensor image = at::empty({height, width, d}, opt), alpha = at::empty({height, width}, opt);
+    Tensor trans = at::empty({height, width}, opt);
+    Tensor last = at::empty({height, width}, opt.dtype(at::kInt));
     AT_DISPATCH_FLOATING_TYPES(dt, "rasterize_fwd", [&] {
         eigs::rasterize_forward<scalar_t>(
             means2d.data_ptr<scalar_t>(), conics.data_ptr<scalar_t>(), colors.data_ptr<scalar_t>(),
@@ -152,28 +156,28 @@ std::tuple<Tensor, Tensor, Tensor, Tensor> rasterize_fwd(Tensor means2d, Tensor 
     return {image, alpha, trans, last};
 }
 
-std::tuple<Tensor, Tensor, Tensor, Tensor, Tensor> rasterize_bwd(Tensor means2d, Tensor conics, Tensor colors,
-                                                         Tensor opacities, Tensor extents, Tensor background,
-                                                         Tensor tile_offsets, Tensor flatten_ids, int64_t width,
-                                                         int64_t height, Tensor trans, Tensor last,
-                                                         Tensor v_image, Tensor v_alpha, int64_t isa) {
+std::tuple<Tensor, Tensor, Tensor, Tensor, Tensor> rasterize_bwd(
+    const Tensor& means2d, const Tensor& conics, const Tensor& colors, const Tensor& opacities,
+    const Tensor& extents, const Tensor& background, const Tensor& tile_offsets, const Tensor& flatten_ids,
+    int64_t width, int64_t height, const Tensor& trans, const Tensor& last, const Tensor& v_image,
+    const Tensor& v_alpha, int64_t isa) {
     const auto dt = means2d.scalar_type();
-    for (auto& [t, name] : {std::pair<Tensor&, const char*>{means2d, "means2d"}, {conics, "conics"},
+    for (const auto& [t, name] : {std::pair<const Tensor&, const char*>{means2d, "means2d"}, {conics, "conics"},
                             {colors, "colors"}, {opacities, "opacities"}, {extents, "extents"},
                             {background, "background"}, {trans, "trans"}, {v_image, "v_image"},
                             {v_alpha, "v_alpha"}})
         check(t, name, dt);
-    check(tile_offsets, "tile_offsets", torch::kInt64);
-    check(flatten_ids, "flatten_ids", torch::kInt64);
-    check(last, "last", torch::kInt32);
+    check(tile_offsets, "tile_offsets", at::kLong);
+    check(flatten_ids, "flatten_ids", at::kLong);
+    check(last, "last", at::kInt);
     const int64_t n = means2d.size(0), d = colors.size(1);
     const int64_t n_isects = flatten_ids.size(0);
     auto opt = means2d.options();
-    Tensor pair_grads = torch::empty({n_isects, 6 + d}, opt);
+    Tensor pair_grads = at::empty({n_isects, 6 + d}, opt);
     // Not zeroed here: each reducing thread zeroes its own range of Gaussians (no serial memset).
-    Tensor v_means2d = torch::empty({n, 2}, opt), v_conics = torch::empty({n, 3}, opt);
-    Tensor v_opacities = torch::empty({n}, opt), v_colors = torch::empty({n, d}, opt);
-    Tensor v_background = torch::empty({d}, opt);
+    Tensor v_means2d = at::empty({n, 2}, opt), v_conics = at::empty({n, 3}, opt);
+    Tensor v_opacities = at::empty({n}, opt), v_colors = at::empty({n, d}, opt);
+    Tensor v_background = at::empty({d}, opt);
     AT_DISPATCH_FLOATING_TYPES(dt, "rasterize_bwd", [&] {
         eigs::rasterize_backward<scalar_t>(
             n, means2d.data_ptr<scalar_t>(), conics.data_ptr<scalar_t>(), colors.data_ptr<scalar_t>(),
@@ -187,14 +191,4 @@ std::tuple<Tensor, Tensor, Tensor, Tensor, Tensor> rasterize_bwd(Tensor means2d,
     return {v_means2d, v_conics, v_opacities, v_colors, v_background};
 }
 
-}  // namespace
-
-PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
-    m.doc() = "eigs CPU Gaussian rasterizer kernels";
-    m.def("project_fwd", &project_fwd);
-    m.def("project_bwd", &project_bwd);
-    m.def("isect_tiles", &isect_tiles);
-    m.def("rasterize_fwd", &rasterize_fwd);
-    m.def("rasterize_bwd", &rasterize_bwd);
-    m.def("cpu_isa_flags", &eigs::cpu_isa_flags);
-}
+}  // namespace eigs::ops
