@@ -205,12 +205,12 @@ def test_backward_rejects_binning_that_does_not_match() -> None:
     cam = camera_list(viewmat, K, means.dtype)
     m2, con, dep, ext, radii = C.project_fwd(means, quats, scales, opac, colors, cam, W, H)
     offs, ids = C.isect_tiles(m2, ext, dep, radii, W, H)
-    image, alpha, trans, last = C.rasterize_fwd(m2, con, colors, opac, ext, bg, offs, ids, W, H, 0)
+    image, alpha, trans, last, work = C.rasterize_fwd(m2, con, colors, opac, ext, bg, offs, ids, W, H, 0)
     v_image, v_alpha = torch.ones_like(image), torch.ones_like(alpha)
     with pytest.raises(RuntimeError, match="binning does not match"):
-        C.rasterize_bwd(m2, con, colors, opac, ext * 3, bg, offs, ids, W, H, trans, last, v_image, v_alpha, 0)
+        C.rasterize_bwd(m2, con, colors, opac, ext * 3, bg, offs, ids, W, H, trans, last, work, v_image, v_alpha, 0)
     # the same number of pairs, but binned one tile to the right of where means2d puts them
     shifted = m2 + torch.tensor([16.0, 0.0])
     offs2, ids2 = C.isect_tiles(shifted, ext, dep, radii, W, H)
     with pytest.raises(RuntimeError, match="binning does not match"):
-        C.rasterize_bwd(m2, con, colors, opac, ext, bg, offs2, ids2, W, H, trans, last, v_image, v_alpha, 0)
+        C.rasterize_bwd(m2, con, colors, opac, ext, bg, offs2, ids2, W, H, trans, last, work, v_image, v_alpha, 0)

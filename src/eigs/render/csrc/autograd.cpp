@@ -71,11 +71,11 @@ struct RasterizeToPixels : public torch::autograd::Function<RasterizeToPixels> {
                                  const Tensor& colors, const Tensor& opacities, const Tensor& background,
                                  const Tensor& extents, const Tensor& tile_offsets, const Tensor& flatten_ids,
                                  int64_t width, int64_t height, int64_t isa) {
-        auto [image, alpha, trans, last] = eigs::ops::rasterize_fwd(means2d, conics, colors, opacities, extents,
+        auto [image, alpha, trans, last, tile_work] = eigs::ops::rasterize_fwd(means2d, conics, colors, opacities, extents,
                                                                     background, tile_offsets, flatten_ids, width,
                                                                     height, isa);
         ctx->save_for_backward(
-            {means2d, conics, colors, opacities, background, extents, tile_offsets, flatten_ids, trans, last});
+            {means2d, conics, colors, opacities, background, extents, tile_offsets, flatten_ids, trans, last, tile_work});
         ctx->saved_data["width"] = width;
         ctx->saved_data["height"] = height;
         ctx->saved_data["isa"] = isa;
@@ -88,7 +88,7 @@ struct RasterizeToPixels : public torch::autograd::Function<RasterizeToPixels> {
         const int64_t D = s[2].size(1);
         const Tensor v_image = or_zeros(grads[0], {H, W, D}, s[0]), v_alpha = or_zeros(grads[1], {H, W}, s[0]);
         auto [v_means2d, v_conics, v_opacities, v_colors, v_background] = eigs::ops::rasterize_bwd(
-            s[0], s[1], s[2], s[3], s[5], s[4], s[6], s[7], W, H, s[8], s[9], v_image, v_alpha,
+            s[0], s[1], s[2], s[3], s[5], s[4], s[6], s[7], W, H, s[8], s[9], s[10], v_image, v_alpha,
             ctx->saved_data["isa"].toInt());
         return once_differentiable({v_means2d, v_conics, v_colors, v_opacities, v_background, Tensor(), Tensor(),
                                     Tensor(), Tensor(), Tensor(), Tensor()});

@@ -57,13 +57,15 @@ int64_t isect_plan(int64_t n, const S* means2d, const S* extents, const S* depth
 void isect_fill(IsectPlan& plan, int64_t* flatten_ids);
 
 // Forward compositing.  colors (N,D), background (D) -> image (H,W,D) = C + T bg, alpha (H,W) = 1 - T,
-// trans (H,W) = final T, last (H,W) int32 = position (within its tile's list) of the last contributing Gaussian, -1 if none.
+// trans (H,W) = final T, last (H,W) int32 = position (within its tile's list) of the last contributing Gaussian, -1 if none,
+// tile_work (n_tiles) = the tile's work units (Gaussians visited + kRowWork per row evaluated), the backward's
+// schedule.
 // isa: 0 = best available, 1 = baseline (SSE2), 2 = AVX2, 3 = AVX-512.
 template <typename S>
 void rasterize_forward(const S* means2d, const S* conics, const S* colors, const S* opacities,
                        const S* extents, const S* background, int64_t d, int64_t width, int64_t height,
                        const int64_t* tile_offsets, const int64_t* flatten_ids, S* image, S* alpha, S* trans,
-                       int32_t* last, int nthreads, int isa);
+                       int32_t* last, int64_t* tile_work, int nthreads, int isa);
 
 // Backward compositing.  v_image (H,W,D), v_alpha (H,W) -> per-pair gradients pair_grads (n_isects, 6 + D)
 // in the order (v_mean2d x, y, v_conic a, b, c, v_opacity, v_color...), stored grouped by Gaussian (its tiles in
@@ -75,9 +77,9 @@ template <typename S>
 void rasterize_backward(int64_t n, const S* means2d, const S* conics, const S* colors, const S* opacities,
                         const S* extents, const S* background, int64_t d, int64_t width, int64_t height,
                         const int64_t* tile_offsets, const int64_t* flatten_ids, const S* trans,
-                        const int32_t* last, const S* v_image, const S* v_alpha, S* pair_grads,
-                        S* v_means2d, S* v_conics, S* v_opacities, S* v_colors, S* v_background, int nthreads,
-                        int isa);
+                        const int32_t* last, const int64_t* tile_work, const S* v_image, const S* v_alpha,
+                        S* pair_grads, S* v_means2d, S* v_conics, S* v_opacities, S* v_colors, S* v_background,
+                        int nthreads, int isa);
 
 // ISA support of this CPU: bit 0 AVX2, bit 1 AVX-512 (F, VL, BW, DQ).
 int cpu_isa_flags();

@@ -126,7 +126,7 @@ std::tuple<Tensor, Tensor> isect_tiles(const Tensor& means2d, const Tensor& exte
     return {offsets, ids};
 }
 
-std::tuple<Tensor, Tensor, Tensor, Tensor> rasterize_fwd(const Tensor& means2d, const Tensor& conics,
+std::tuple<Tensor, Tensor, Tensor, Tensor, Tensor> rasterize_fwd(const Tensor& means2d, const Tensor& conics,
                                                          const Tensor& colors, const Tensor& opacities,
                                                          const Tensor& extents, const Tensor& background,
                                                          const Tensor& tile_offsets, const Tensor& flatten_ids,
@@ -138,8 +138,11 @@ std::tuple<Tensor, Tensor, Tensor, Tensor> rasterize_fwd(const Tensor& means2d, 
         check(t, name, dt);
     check(tile_offsets, "tile_offsets", at::kLong);
     check(flatten_ids, "flatten_ids", at::kLong);
+    const int64_t n_tiles = n_tiles_of(width, height);
+    TORCH_CHECK(tile_offsets.numel() == n_tiles + 1, "tile_offsets must have ", n_tiles + 1, " entries");
     const int64_t d = colors.size(1);
     auto opt = means2d.options();
+    Tensor tile_work = at::empty({n_tiles}, opt.dtype(at::kLong));
     Tensor image = at::empty({height, width, d}, opt), alpha = at::empty({height, width}, opt);
     Tensor trans = at::empty({height, width}, opt);
     Tensor last = at::empty({height, width}, opt.dtype(at::kInt));
@@ -149,18 +152,17 @@ std::tuple<Tensor, Tensor, Tensor, Tensor> rasterize_fwd(const Tensor& means2d, 
             opacities.data_ptr<scalar_t>(), extents.data_ptr<scalar_t>(), background.data_ptr<scalar_t>(), d,
             width, height, tile_offsets.data_ptr<int64_t>(), flatten_ids.data_ptr<int64_t>(),
             image.data_ptr<scalar_t>(), alpha.data_ptr<scalar_t>(), trans.data_ptr<scalar_t>(),
-            last.data_ptr<int32_t>(),
-            threads(std::min(n_tiles_of(width, height), flatten_ids.size(0) / 16 + 1), 1),
-            int(isa));
+            last.data_ptr<int32_t>(), tile_work.data_ptr<int64_t>(),
+            threads(std::min(n_tiles, flatten_ids.size(0) / 16 + 1), 1), int(isa));
     });
-    return {image, alpha, trans, last};
+    return {image, alpha, trans, last, tile_work};
 }
 
 std::tuple<Tensor, Tensor, Tensor, Tensor, Tensor> rasterize_bwd(
     const Tensor& means2d, const Tensor& conics, const Tensor& colors, const Tensor& opacities,
     const Tensor& extents, const Tensor& background, const Tensor& tile_offsets, const Tensor& flatten_ids,
-    int64_t width, int64_t height, const Tensor& trans, const Tensor& last, const Tensor& v_image,
-    const Tensor& v_alpha, int64_t isa) {
+    int64_t width, int64_t height, const Tensor& trans, const Tensor& last, const Tensor& tile_work,
+    const Tensor& v_image, const Tensor& v_alpha, int64_t isa) {
     const auto dt = means2d.scalar_type();
     for (const auto& [t, name] : {std::pair<const Tensor&, const char*>{means2d, "means2d"}, {conics, "conics"},
                             {colors, "colors"}, {opacities, "opacities"}, {extents, "extents"},
@@ -170,11 +172,15 @@ std::tuple<Tensor, Tensor, Tensor, Tensor, Tensor> rasterize_bwd(
     check(tile_offsets, "tile_offsets", at::kLong);
     check(flatten_ids, "flatten_ids", at::kLong);
     check(last, "last", at::kInt);
+    check(tile_work, "tile_work", at::kLong);
+    const int64_t n_tiles = n_tiles_of(width, height);
+    TORCH_CHECK(tile_offsets.numel() == n_tiles + 1, "tile_offsets must have ", n_tiles + 1, " entries");
+    TORCH_CHECK(tile_work.numel() == n_tiles, "tile_work must have ", n_tiles, " entries");
     const int64_t n = means2d.size(0), d = colors.size(1);
     const int64_t n_isects = flatten_ids.size(0);
     auto opt = means2d.options();
     Tensor pair_grads = at::empty({n_isects, 6 + d}, opt);
-    // Not zeroed here: each reducing thread zeroes its own range of Gaussians (no serial memset).
+    // Not zeroed: the kernel writes every entry.
     Tensor v_means2d = at::empty({n, 2}, opt), v_conics = at::empty({n, 3}, opt);
     Tensor v_opacities = at::empty({n}, opt), v_colors = at::empty({n, d}, opt);
     Tensor v_background = at::empty({d}, opt);
@@ -183,10 +189,11 @@ std::tuple<Tensor, Tensor, Tensor, Tensor, Tensor> rasterize_bwd(
             n, means2d.data_ptr<scalar_t>(), conics.data_ptr<scalar_t>(), colors.data_ptr<scalar_t>(),
             opacities.data_ptr<scalar_t>(), extents.data_ptr<scalar_t>(), background.data_ptr<scalar_t>(), d,
             width, height, tile_offsets.data_ptr<int64_t>(), flatten_ids.data_ptr<int64_t>(),
-            trans.data_ptr<scalar_t>(), last.data_ptr<int32_t>(), v_image.data_ptr<scalar_t>(),
+            trans.data_ptr<scalar_t>(), last.data_ptr<int32_t>(), tile_work.data_ptr<int64_t>(),
+            v_image.data_ptr<scalar_t>(),
             v_alpha.data_ptr<scalar_t>(), pair_grads.data_ptr<scalar_t>(), v_means2d.data_ptr<scalar_t>(),
             v_conics.data_ptr<scalar_t>(), v_opacities.data_ptr<scalar_t>(), v_colors.data_ptr<scalar_t>(),
-            v_background.data_ptr<scalar_t>(), threads(std::min(n_tiles_of(width, height), n_isects / 16 + 1), 1), int(isa));
+            v_background.data_ptr<scalar_t>(), threads(std::min(n_tiles, n_isects / 16 + 1), 1), int(isa));
     });
     return {v_means2d, v_conics, v_opacities, v_colors, v_background};
 }

@@ -31,8 +31,8 @@ std::tuple<Tensor, Tensor, Tensor> project_bwd(const Tensor& means, const Tensor
 std::tuple<Tensor, Tensor> isect_tiles(const Tensor& means2d, const Tensor& extents, const Tensor& depths,
                                        const Tensor& radii, int64_t width, int64_t height);
 
-// -> image (H,W,D), alpha (H,W), trans (H,W) final transmittance, last (H,W) int32
-std::tuple<Tensor, Tensor, Tensor, Tensor> rasterize_fwd(const Tensor& means2d, const Tensor& conics,
+// -> image (H,W,D), alpha (H,W), trans (H,W) final transmittance, last (H,W) int32, tile_work (n_tiles) int64
+std::tuple<Tensor, Tensor, Tensor, Tensor, Tensor> rasterize_fwd(const Tensor& means2d, const Tensor& conics,
                                                          const Tensor& colors, const Tensor& opacities,
                                                          const Tensor& extents, const Tensor& background,
                                                          const Tensor& tile_offsets, const Tensor& flatten_ids,
@@ -43,7 +43,7 @@ std::tuple<Tensor, Tensor, Tensor, Tensor> rasterize_fwd(const Tensor& means2d, 
 std::tuple<Tensor, Tensor, Tensor, Tensor, Tensor> rasterize_bwd(
     const Tensor& means2d, const Tensor& conics, const Tensor& colors, const Tensor& opacities,
     const Tensor& extents, const Tensor& background, const Tensor& tile_offsets, const Tensor& flatten_ids,
-    int64_t width, int64_t height, const Tensor& trans, const Tensor& last, const Tensor& v_image,
-    const Tensor& v_alpha, int64_t isa);
+    int64_t width, int64_t height, const Tensor& trans, const Tensor& last, const Tensor& tile_work,
+    const Tensor& v_image, const Tensor& v_alpha, int64_t isa);
 
 }  // namespace eigs::ops

@@ -228,9 +228,9 @@ template <typename S>
 void rasterize_backward(int64_t n, const S* means2d, const S* conics, const S* colors, const S* opacities,
                         const S* extents, const S* background, int64_t d, int64_t width, int64_t height,
                         const int64_t* tile_offsets, const int64_t* flatten_ids, const S* trans,
-                        const int32_t* last, const S* v_image, const S* v_alpha, S* pair_grads,
-                        S* v_means2d, S* v_conics, S* v_opacities, S* v_colors, S* v_background, int nthreads,
-                        int isa) {
+                        const int32_t* last, const int64_t* tile_work, const S* v_image, const S* v_alpha,
+                        S* pair_grads, S* v_means2d, S* v_conics, S* v_opacities, S* v_colors, S* v_background,
+                        int nthreads, int isa) {
     const int64_t n_tiles = ((width + kTile - 1) / kTile) * ((height + kTile - 1) / kTile);
     const int64_t n_isects = tile_offsets[n_tiles];
     const int64_t P = 6 + d;
@@ -266,7 +266,8 @@ void rasterize_backward(int64_t n, const S* means2d, const S* conics, const S* c
                       width,        height,      tile_offsets, flatten_ids, trans, last, v_image,
                       v_alpha,      rect.get(),  slot0.get(), &mismatch, pair_grads, tile_bg.data()};
     const BwdFn<S> fn = pick_bwd(means2d, d, resolve_isa(isa));
-    const std::vector<int64_t> order = tile_schedule(tile_offsets, n_tiles, nthreads);
+    // Costliest tiles first, by the work the forward counted there (a far better estimate than list lengths).
+    const std::vector<int64_t> order = tile_schedule(n_tiles, nthreads, [tile_work](int64_t t) { return tile_work[t]; });
 #pragma omp parallel num_threads(nthreads)
     {
         {
@@ -311,12 +312,12 @@ void rasterize_backward(int64_t n, const S* means2d, const S* conics, const S* c
 
 template void rasterize_backward<float>(int64_t, const float*, const float*, const float*, const float*,
                                         const float*, const float*, int64_t, int64_t, int64_t, const int64_t*,
-                                        const int64_t*, const float*, const int32_t*, const float*, const float*,
-                                        float*, float*, float*, float*, float*, float*, int, int);
+                                        const int64_t*, const float*, const int32_t*, const int64_t*, const float*,
+                                        const float*, float*, float*, float*, float*, float*, float*, int, int);
 template void rasterize_backward<double>(int64_t, const double*, const double*, const double*, const double*,
                                          const double*, const double*, int64_t, int64_t, int64_t,
                                          const int64_t*, const int64_t*, const double*, const int32_t*,
-                                         const double*, const double*, double*, double*, double*, double*,
-                                         double*, double*, int, int);
+                                         const int64_t*, const double*, const double*, double*, double*, double*,
+                                         double*, double*, double*, int, int);
 
 }  // namespace eigs

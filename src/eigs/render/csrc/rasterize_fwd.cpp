@@ -18,6 +18,7 @@ struct FwdCtx {
     const int64_t *tile_offsets, *flatten_ids;
     S *image, *alpha, *trans;
     int32_t* last;
+    int64_t* tile_work;
 };
 
 // Per-thread scratch: T, done flag, colour accumulators (d x 256), weights of one row, last index.
@@ -51,6 +52,7 @@ EIGS_INLINE void fwd_tile(const FwdCtx<S>& A, int64_t tile, FwdScratch<S>& ws) {
     std::fill(C, C + D * kTilePix, S(0));
     S px[kTile];
     for (int l = 0; l < kTile; ++l) px[l] = S(tg.x0 + l) + S(0.5);
+    int64_t work = 0;
 
     for (int64_t k = 0; k < count; ++k) {
         if ((k & 15) == 15) {  // refresh the per-row "all lanes done" flags
@@ -72,8 +74,10 @@ EIGS_INLINE void fwd_tile(const FwdCtx<S>& A, int64_t tile, FwdScratch<S>& ws) {
         int r0, r1;
         box_rows(double(my), double(A.extents[2 * g + 1]), tg.y0, tg.rows, r0, r1);
         const int32_t kk = int32_t(k);
+        ++work;
         for (int r = r0; r <= r1; ++r) {
             if (!row_alive[r]) continue;
+            work += kRowWork;
             const S dy = (S(tg.y0 + r) + S(0.5)) - my;
             S* __restrict__ Tr = T + r * kTile;
             S* __restrict__ Dr = done + r * kTile;
@@ -101,6 +105,7 @@ EIGS_INLINE void fwd_tile(const FwdCtx<S>& A, int64_t tile, FwdScratch<S>& ws) {
         }
     }
 
+    A.tile_work[tile] = work;
     for (int r = 0; r < tg.rows; ++r) {
         for (int l = 0; l < tg.cols; ++l) {
             const int64_t pix = (tg.y0 + r) * A.width + (tg.x0 + l);
@@ -166,12 +171,14 @@ template <typename S>
 void rasterize_forward(const S* means2d, const S* conics, const S* colors, const S* opacities,
                        const S* extents, const S* background, int64_t d, int64_t width, int64_t height,
                        const int64_t* tile_offsets, const int64_t* flatten_ids, S* image, S* alpha, S* trans,
-                       int32_t* last, int nthreads, int isa) {
+                       int32_t* last, int64_t* tile_work, int nthreads, int isa) {
     const FwdCtx<S> A{means2d, conics,      colors, opacities, extents, background, d,   width, height,
-                      tile_offsets, flatten_ids, image, alpha,     trans,   last};
+                      tile_offsets, flatten_ids, image, alpha,     trans,   last,   tile_work};
     const FwdFn<S> fn = pick_fwd(means2d, d, resolve_isa(isa));
     const int64_t n_tiles = ((width + kTile - 1) / kTile) * ((height + kTile - 1) / kTile);
-    const std::vector<int64_t> order = tile_schedule(tile_offsets, n_tiles, nthreads);
+    // Longest lists first (the forward's cost is not known before it runs).
+    const std::vector<int64_t> order =
+        tile_schedule(n_tiles, nthreads, [tile_offsets](int64_t t) { return tile_offsets[t + 1] - tile_offsets[t]; });
 #pragma omp parallel num_threads(nthreads)
     {
         FwdScratch<S> ws(d);
@@ -182,10 +189,10 @@ void rasterize_forward(const S* means2d, const S* conics, const S* colors, const
 
 template void rasterize_forward<float>(const float*, const float*, const float*, const float*, const float*,
                                        const float*, int64_t, int64_t, int64_t, const int64_t*, const int64_t*,
-                                       float*, float*, float*, int32_t*, int, int);
+                                       float*, float*, float*, int32_t*, int64_t*, int, int);
 template void rasterize_forward<double>(const double*, const double*, const double*, const double*,
                                         const double*, const double*, int64_t, int64_t, int64_t,
-                                        const int64_t*, const int64_t*, double*, double*, double*, int32_t*, int,
-                                        int);
+                                        const int64_t*, const int64_t*, double*, double*, double*, int32_t*,
+                                        int64_t*, int, int);
 
 }  // namespace eigs
