@@ -47,3 +47,9 @@ def test_isa_detection() -> None:
     assert ("avx2" in isas) == (" avx2" in flags and " fma" in flags)
     with pytest.raises(ValueError, match="isa"):
         _backend.isa_code("sse9")
+
+
+def test_every_csrc_file_is_built_and_hashed() -> None:
+    # A header missing from HEADERS would not enter the cache key: editing it would load a stale build.
+    on_disk = {p.name for p in _backend.CSRC.iterdir() if p.suffix in (".cpp", ".h")}
+    assert on_disk == set(_backend.SOURCES + _backend.HEADERS)

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "pair_math.h"
+#include "tile_geom.h"
 
 // Per-ISA wrappers: the kernel bodies are always-inline templates, instantiated inside functions compiled for
 // each target, so one source gives a baseline (SSE2), an AVX2 and an AVX-512 version; the choice is made at
@@ -39,19 +40,19 @@ inline TileGeom tile_geom(int64_t tile, int64_t width, int64_t height) {
     return t;
 }
 
-// Rows [r0, r1] of the tile whose pixel centres lie inside the Gaussian's conservative box
-// (the same double-precision rule as the tile binning); r0 > r1 when none.
+// Rows [r0, r1] of the tile whose pixel centres lie inside the Gaussian's conservative box: the binning's own
+// pixel range (tile_geom.h), clipped to the tile with integer arithmetic; r0 > r1 when none.
 inline void box_rows(double my, double ey, int64_t y0, int rows, int& r0, int& r1) {
-    double a = std::ceil(my - ey - 0.5 - double(y0)), b = std::floor(my + ey - 0.5 - double(y0));
-    a = std::max(a, 0.0);
-    b = std::min(b, double(rows - 1));
-    if (!(a <= b)) {
+    int64_t lo, hi;
+    pixel_range(my, ey, y0 + rows, lo, hi);  // absolute rows, clamped to [0, y0 + rows - 1]
+    lo = std::max(lo, y0);
+    if (lo > hi) {
         r0 = 1;
         r1 = 0;
         return;
     }
-    r0 = int(a);
-    r1 = int(b);
+    r0 = int(lo - y0);
+    r1 = int(hi - y0);
 }
 
 // Tiles in the order the threads pick them up: with one thread row-major; with several the costliest first
