@@ -3,9 +3,11 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <memory>
 #include <numeric>
+#include <type_traits>
 #include <vector>
 
 #include "kernels.h"
@@ -302,6 +304,40 @@ struct DepthKey {
     bool operator<(const DepthKey& o) const { return depth < o.depth || (depth == o.depth && g < o.g); }
 };
 
+// Sorts keys[0, m) by (depth, index), given that they arrive in ascending index: a stable LSD radix sort on the
+// depth's bit pattern (depths are positive, so their IEEE bit patterns order like the values), 8-bit digits,
+// skipping digits that all keys share, with tmp[0, m) as scratch.  Same order as std::sort on the unique keys,
+// ~2-3x faster at 1k-100k keys; short runs use std::sort.
+template <typename S>
+void sort_by_depth(DepthKey<S>* keys, DepthKey<S>* tmp, int64_t m) {
+    if (m < 256) {
+        std::sort(keys, keys + m);
+        return;
+    }
+    using U = std::conditional_t<sizeof(S) == 4, uint32_t, uint64_t>;
+    const auto bits = [](S d) {
+        U u;
+        std::memcpy(&u, &d, sizeof u);
+        return u;
+    };
+    DepthKey<S>* src = keys;
+    DepthKey<S>* dst = tmp;
+    for (int shift = 0; shift < int(8 * sizeof(S)); shift += 8) {
+        int64_t count[256] = {};
+        for (int64_t i = 0; i < m; ++i) ++count[(bits(src[i].depth) >> shift) & 255];
+        if (count[(bits(src[0].depth) >> shift) & 255] == m) continue;  // every key has this digit
+        int64_t pos = 0;
+        for (int64_t& c : count) {
+            const int64_t v = c;
+            c = pos;
+            pos += v;
+        }
+        for (int64_t i = 0; i < m; ++i) dst[count[(bits(src[i].depth) >> shift) & 255]++] = src[i];
+        std::swap(src, dst);
+    }
+    if (src != keys) std::copy(src, src + m, keys);
+}
+
 // [lo, hi) of chunk c of n items split into k near-equal chunks.
 inline int64_t chunk_lo(int64_t n, int k, int c) { return n * c / k; }
 
@@ -336,7 +372,7 @@ int64_t isect_plan(int64_t n, const S* means2d, const S* extents, const S* depth
     plan.rect.reset(new int32_t[4 * n1]);
     plan.order.reset(new int64_t[n1]);
     std::vector<int64_t> kept(size_t(k) + 1, 0);
-    std::unique_ptr<Key[]> keys_buf(new Key[n1]), tmp_buf(k > 1 ? new Key[n1] : nullptr);
+    std::unique_ptr<Key[]> keys_buf(new Key[n1]), tmp_buf(new Key[n1]);
     Key* keys = keys_buf.get();
     Key* tmp = tmp_buf.get();
     plan.cursor.assign(size_t(k) * size_t(n_tiles), 0);
@@ -360,7 +396,7 @@ int64_t isect_plan(int64_t n, const S* means2d, const S* extents, const S* depth
                 ++m;
             }
             kept[size_t(c) + 1] = m;
-            std::sort(keys + lo, keys + lo + m);
+            sort_by_depth(keys + lo, tmp + lo, m);
         }
         // 2. compact the sorted runs (serial, in place: each run moves left), then pairwise merge rounds; every
         // merge's output is cut into k pieces at co-ranks and the pieces are merged by all threads.
