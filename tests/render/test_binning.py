@@ -27,16 +27,21 @@ def _reference_bins(means2d, extents, depths, radii, width: int, height: int) ->
     return bins
 
 
+@pytest.mark.parametrize("depth_kind", ["ties", "wide"])
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
-def test_binning_order_is_exact_for_any_thread_count(dtype: torch.dtype) -> None:
+def test_binning_order_is_exact_for_any_thread_count(dtype: torch.dtype, depth_kind: str) -> None:
     g = torch.Generator().manual_seed(5)
-    # >= 4 x 256 Gaussians: up to 4 threads really run (3 runs: 2 merge rounds, one with an odd run; every merge
-    # is cut into one piece per thread at co-ranks)
-    n, W, H = 4000, 83, 61
+    # >= 4 x 1024 Gaussians: up to 4 threads really run (3 runs: 2 merge rounds, one with an odd run; every merge
+    # is cut into one piece per thread at co-ranks), and every chunk holds >= 256 keys, so the radix sort runs
+    n, W, H = 5000, 83, 61
     means2d = (torch.rand(n, 2, generator=g, dtype=torch.float64) * torch.tensor([W + 40.0, H + 40.0]) - 20).to(dtype)
     extents = (0.5 + 12 * torch.rand(n, 2, generator=g, dtype=torch.float64)).to(dtype)
-    # few distinct depths: many ties, which must be ordered by index
-    depths = (1 + torch.randint(0, 7, (n,), generator=g).to(torch.float64) / 4).to(dtype)
+    if depth_kind == "ties":  # few distinct depths: many ties, which must be ordered by index
+        depths = (1 + torch.randint(0, 7, (n,), generator=g).to(torch.float64) / 4).to(dtype)
+    else:  # log-uniform over 1e-2 .. 1e6 (every radix digit varies), every 50th a repeat of the first
+        depths = torch.exp(torch.empty(n, dtype=torch.float64).uniform_(math.log(1e-2), math.log(1e6), generator=g))
+        depths[1::50] = depths[0]
+        depths = depths.to(dtype)
     radii = extents.ceil().to(torch.int32)
     radii[torch.rand(n, generator=g) < 0.2] = 0  # culled
     ref = _reference_bins(means2d.double().tolist(), extents.double().tolist(), depths.double().tolist(),
