@@ -71,11 +71,11 @@ struct RasterizeToPixels : public torch::autograd::Function<RasterizeToPixels> {
                                  const Tensor& colors, const Tensor& opacities, const Tensor& background,
                                  const Tensor& extents, const Tensor& tile_offsets, const Tensor& flatten_ids,
                                  int64_t width, int64_t height, int64_t isa) {
-        auto [image, alpha, trans, last, tile_work] = eigs::ops::rasterize_fwd(means2d, conics, colors, opacities, extents,
-                                                                    background, tile_offsets, flatten_ids, width,
-                                                                    height, isa);
-        ctx->save_for_backward(
-            {means2d, conics, colors, opacities, background, extents, tile_offsets, flatten_ids, trans, last, tile_work});
+        auto [image, alpha, trans, last, tile_work] =
+            eigs::ops::rasterize_fwd(means2d, conics, colors, opacities, extents, background, tile_offsets,
+                                     flatten_ids, width, height, isa);
+        ctx->save_for_backward({means2d, conics, colors, opacities, background, extents, tile_offsets, flatten_ids,
+                                trans, last, tile_work});
         ctx->saved_data["width"] = width;
         ctx->saved_data["height"] = height;
         ctx->saved_data["isa"] = isa;

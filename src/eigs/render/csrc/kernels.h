@@ -57,9 +57,9 @@ int64_t isect_plan(int64_t n, const S* means2d, const S* extents, const S* depth
 void isect_fill(IsectPlan& plan, int64_t* flatten_ids);
 
 // Forward compositing.  colors (N,D), background (D) -> image (H,W,D) = C + T bg, alpha (H,W) = 1 - T,
-// trans (H,W) = final T, last (H,W) int32 = position (within its tile's list) of the last contributing Gaussian, -1 if none,
-// tile_work (n_tiles) = the tile's work units (Gaussians visited + kRowWork per row evaluated), the backward's
-// schedule.
+// trans (H,W) = final T, last (H,W) int32 = position (within its tile's list) of the last contributing Gaussian
+// (-1 if none), tile_work (n_tiles) = the tile's work units (Gaussians visited + kRowWork per row evaluated),
+// the backward's schedule.
 // isa: 0 = best available, 1 = baseline (SSE2), 2 = AVX2, 3 = AVX-512.
 template <typename S>
 void rasterize_forward(const S* means2d, const S* conics, const S* colors, const S* opacities,

@@ -267,7 +267,8 @@ void rasterize_backward(int64_t n, const S* means2d, const S* conics, const S* c
                       v_alpha,      rect.get(),  slot0.get(), &mismatch, pair_grads, tile_bg.data()};
     const BwdFn<S> fn = pick_bwd(means2d, d, resolve_isa(isa));
     // Costliest tiles first, by the work the forward counted there (a far better estimate than list lengths).
-    const std::vector<int64_t> order = tile_schedule(n_tiles, nthreads, [tile_work](int64_t t) { return tile_work[t]; });
+    const std::vector<int64_t> order =
+        tile_schedule(n_tiles, nthreads, [tile_work](int64_t t) { return tile_work[t]; });
 #pragma omp parallel num_threads(nthreads)
     {
         {
