@@ -98,9 +98,9 @@ def test_backward_is_deterministic_across_threads() -> None:
 
 
 def test_small_image_pipeline_is_bit_identical_across_threads() -> None:
-    # 64 x 64 (16 tiles) with 1,200 Gaussians: projection, its backward and binning all run on several threads
-    # (grains of 256 Gaussians), the kernels on 2 or 3; image, alpha and every gradient (background included)
-    # must not depend on the thread count.
+    # 64 x 64 (16 tiles) with 1,200 Gaussians: projection and its backward run on several threads (grain of 256
+    # Gaussians), the kernels on 2 or 3 (binning stays on one below 2,048 Gaussians; test_binning covers its
+    # threads); image, alpha and every gradient (background included) must not depend on the thread count.
     base = random_scene(1200, 64, 64, seed=12)
     g = torch.Generator().manual_seed(12)
     v_image = torch.randn(64, 64, 3, generator=g, dtype=torch.float64)

@@ -13,6 +13,8 @@ from typing import Literal
 import torch
 from torch import Tensor
 
+from eigs.render._wrapper import camera_list
+
 __all__ = ["rasterize", "means2d_grad"]
 
 Backend = Literal["auto", "cpu", "gsplat"]
@@ -95,10 +97,7 @@ def rasterize(
         raise TypeError(f"background must be {dtype} on {device} like means")
     viewmat = viewmat.detach().to(device=device, dtype=dtype)
     K = K.detach().to(device=device, dtype=dtype)
-    # The 25 camera numbers as one host list (the cpu backend takes them so): two .tolist() calls are cheaper
-    # than any chain of small tensor ops (per-call latency).
-    vm, k = viewmat.tolist(), K.tolist()
-    cam = vm[0] + vm[1] + vm[2] + vm[3] + k[0] + k[1] + k[2]
+    cam = camera_list(viewmat, K, dtype)  # the 25 camera numbers as one host list (the cpu backend takes them so)
     if not all(map(math.isfinite, cam)):
         raise ValueError("viewmat and K must be finite")
     if not (cam[16] > 0 and cam[20] > 0):

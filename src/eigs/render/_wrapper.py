@@ -20,8 +20,12 @@ def _isa() -> int:
 
 
 def camera_list(viewmat: Tensor, K: Tensor, dtype: torch.dtype) -> list[float]:
-    """The 16 entries of viewmat then the 9 of K (row-major), rounded to ``dtype``, as Python floats."""
-    return torch.cat((viewmat.detach().reshape(-1), K.detach().reshape(-1))).to(dtype).tolist()
+    """The 16 entries of viewmat then the 9 of K (row-major), rounded to ``dtype``, as Python floats.
+
+    Two ``.tolist()`` calls: cheaper than any chain of small tensor ops (this runs once per render).
+    """
+    vm, k = viewmat.detach().to(dtype).tolist(), K.detach().to(dtype).tolist()
+    return vm[0] + vm[1] + vm[2] + vm[3] + k[0] + k[1] + k[2]
 
 
 def project(
