@@ -37,7 +37,7 @@ def blurry_edi(scene_h5: Path, out: Path) -> None:
     latent times at mid-exposure so it is scored against the pose the blurry frame averages around."""
     import cv2
 
-    from eigs.events.edi_file import EdiResult, latent_png_name, write_edi
+    from eigs.artifacts.edi import EdiResult, latent_png_name, write_edi
     from eigs.scene.io import read_scene
 
     s = read_scene(scene_h5, events=False)

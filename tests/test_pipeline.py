@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from eigs.events.edi_file import read_edi
+from eigs.artifacts.edi import read_edi
 from eigs.scene import read_scene
 
 REPO = Path(__file__).resolve().parents[1]

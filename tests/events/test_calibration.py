@@ -10,10 +10,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from eigs.artifacts.edi import read_edi, write_edi
 from eigs.events import calibration as cal
 from eigs.events.binning import polarity_counts
 from eigs.events.edi import ExposureIntegral
-from eigs.events.edi_file import read_edi, write_edi
 from eigs.events.pipeline import EdiOptions, compute_edi
 from eigs.scene import Events
 from tests.events.sim import make_scene

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from eigs.artifacts.edi import latent_png_name, parse_latent_png_name, read_edi
 from eigs.cli import main
-from eigs.events.edi_file import latent_png_name, parse_latent_png_name, read_edi
 from eigs.scene import write_scene
 from tests.events.sim import make_scene
 

@@ -6,8 +6,7 @@ import h5py
 import numpy as np
 import pytest
 
-from eigs.errors import EigsError
-from eigs.sfm.artifacts import (
+from eigs.artifacts.poses import (
     LatentPoses,
     TestCameras,
     read_poses,
@@ -15,6 +14,7 @@ from eigs.sfm.artifacts import (
     write_poses,
     write_test_cameras,
 )
+from eigs.errors import EigsError
 
 
 def poses(v=3, l_=4) -> LatentPoses:

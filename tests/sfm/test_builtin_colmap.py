@@ -12,9 +12,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from eigs.events.edi_file import write_edi
+from eigs.artifacts.edi import write_edi
+from eigs.artifacts.poses import METHOD_REGISTERED, read_poses, read_test_cameras
 from eigs.events.pipeline import EdiOptions, compute_edi
-from eigs.sfm.artifacts import METHOD_REGISTERED, read_poses, read_test_cameras
 from eigs.sfm.run import SfmConfig, run_sfm
 from eigs.synth.generate import generate, write_generated
 

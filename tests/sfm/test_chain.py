@@ -8,11 +8,11 @@ import numpy as np
 import pycolmap
 import pytest
 
+from eigs.artifacts.gaussians import read_gaussian_ply
+from eigs.artifacts.poses import METHOD_GIVEN, read_poses, read_test_cameras
 from eigs.cli import main
 from eigs.scene.io import read_scene
 from eigs.sfm.align import Sim3, extent
-from eigs.sfm.artifacts import METHOD_GIVEN, read_poses, read_test_cameras
-from eigs.sfm.ply import read_gaussian_ply
 
 
 def canonical_of(poses) -> Sim3:

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from plyfile import PlyData
 
+from eigs.artifacts.gaussians import SH_C0, read_gaussian_ply, write_gaussian_ply
 from eigs.errors import EigsError
 from eigs.sfm.init import gaussians_from_points, initialize
-from eigs.sfm.ply import SH_C0, read_gaussian_ply, write_gaussian_ply
 
 
 def test_ply_round_trip_and_layout(tmp_path):

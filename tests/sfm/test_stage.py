@@ -10,11 +10,11 @@ import numpy as np
 import pycolmap
 import pytest
 
+from eigs.artifacts.edi import latent_png_name
+from eigs.artifacts.poses import METHOD_FALLBACK, METHOD_GIVEN, METHOD_REGISTERED, read_poses, read_test_cameras
 from eigs.cli import main
 from eigs.errors import EigsError
-from eigs.events.edi_file import latent_png_name
 from eigs.sfm.align import Sim3, extent
-from eigs.sfm.artifacts import METHOD_FALLBACK, METHOD_GIVEN, METHOD_REGISTERED, read_poses, read_test_cameras
 from eigs.sfm.colmap import c2w_of
 from eigs.sfm.run import SfmConfig, run_sfm
 
@@ -67,7 +67,7 @@ def test_given_mode_reproduces_poses_and_triangulates_on_the_surfaces(scene8, tm
     # init from this model
     ply = tmp_path / "init.ply"
     assert main(["init", str(out), "-o", str(ply), "--min-points", "10"]) == 0
-    from eigs.sfm.ply import read_gaussian_ply
+    from eigs.artifacts.gaussians import read_gaussian_ply
 
     cloud = read_gaussian_ply(ply)
     assert len(cloud) == len(xyz)

@@ -50,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
     import logging
     import time
 
-    from eigs.events.edi_file import write_edi
+    from eigs.artifacts.edi import write_edi
     from eigs.events.pipeline import EdiOptions, compute_edi, write_latent_pngs
     from eigs.scene import read_scene
 

@@ -1,4 +1,4 @@
-"""The ``edi`` stage: a scene → :class:`~eigs.events.edi_file.EdiResult` (+ latent PNGs).
+"""The ``edi`` stage: a scene → :class:`~eigs.artifacts.edi.EdiResult` (+ latent PNGs).
 
 Steps per scene (``docs/edi.md``): choose the mode, the latent times and the bins; build the hot-pixel mask;
 per view count the events (views under :data:`SHARP_EVENTS_PER_PIXEL` are copied and marked sharp), bin them and,
@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from eigs.artifacts.edi import EdiResult, latent_png_name
 from eigs.errors import EigsError
 from eigs.events import binning
 from eigs.events import calibration as cal
@@ -30,7 +31,6 @@ from eigs.events.edi import (
     from_linear,
     to_linear,
 )
-from eigs.events.edi_file import EdiResult, latent_png_name
 from eigs.scene.model import Scene
 from eigs.util.atomic import atomic_path
 from eigs.util.progress import progress

@@ -3,6 +3,6 @@ triangulation only, one canonical frame, test cameras, Sim(3) accuracy report an
 
 Modules: :mod:`~eigs.sfm.colmap` (pycolmap wrapper), :mod:`~eigs.sfm.given` (fixed-pose triangulation),
 :mod:`~eigs.sfm.canonical`, :mod:`~eigs.sfm.register` (test cameras), :mod:`~eigs.sfm.align` (Sim(3), ATE),
-:mod:`~eigs.sfm.artifacts` (``poses.h5`` / ``test_cameras.h5`` readers and writers), :mod:`~eigs.sfm.init`
-and :mod:`~eigs.sfm.ply` (Gaussian initialization). See docs/sfm.md.
+:mod:`~eigs.sfm.init` (Gaussian initialization). The artifacts it writes (``poses.h5``, ``test_cameras.h5``, the PLY)
+are defined in :mod:`eigs.artifacts`. See docs/sfm.md.
 """

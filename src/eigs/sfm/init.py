@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from eigs.sfm.ply import GaussianCloud, logit, rgb_to_sh_dc
+from eigs.artifacts.gaussians import GaussianCloud, logit, rgb_to_sh_dc
 
 log = logging.getLogger(__name__)
 

@@ -28,10 +28,10 @@ def run(args: argparse.Namespace) -> int:
 
     import numpy as np
 
+    from eigs.artifacts.gaussians import write_gaussian_ply
+    from eigs.artifacts.poses import read_poses
     from eigs.errors import EigsError
-    from eigs.sfm.artifacts import read_poses
     from eigs.sfm.init import initialize
-    from eigs.sfm.ply import write_gaussian_ply
 
     log = logging.getLogger("eigs.sfm.init")
     sfm = Path(args.sfm)

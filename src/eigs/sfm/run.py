@@ -112,7 +112,7 @@ def run_sfm(
     cfg: SfmConfig | None = None,
 ) -> dict:
     """Run the stage and write ``out_dir`` atomically. Returns the report (also in ``report.json``)."""
-    from eigs.events.edi_file import latent_png_name, read_edi
+    from eigs.artifacts.edi import latent_png_name, read_edi
     from eigs.scene import io as scene_io
     from eigs.sfm import colmap as cm
     from eigs.util.atomic import atomic_path
@@ -319,7 +319,7 @@ def run_sfm(
             with timer("test cameras"):
                 tc, report["test_cameras"] = _test_cameras(scene, rec, db, work, mode, canon, est_to_gt, cfg, opts)
         # -- write -----------------------------------------------------------------------------------
-        from eigs.sfm.artifacts import LatentPoses, write_poses, write_test_cameras
+        from eigs.artifacts.poses import LatentPoses, write_poses, write_test_cameras
 
         rec.write(tmp)
         write_poses(
@@ -445,8 +445,8 @@ def _accuracy(c2w, registered, gt, sharp) -> tuple:
 
 def _test_cameras(scene, rec, db, work, mode, canon, est_to_gt, cfg, opts):
     """Cameras of every ground-truth sharp image in the model (canonical) frame."""
+    from eigs.artifacts.poses import METHOD_FALLBACK, METHOD_GIVEN, METHOD_REGISTERED, METHODS, TestCameras
     from eigs.sfm.align import trajectory_accuracy, umeyama
-    from eigs.sfm.artifacts import METHOD_FALLBACK, METHOD_GIVEN, METHOD_REGISTERED, METHODS, TestCameras
 
     sh = scene.sharp
     cam = scene.camera

@@ -15,6 +15,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from eigs.artifacts._h5 import open_artifact
 from eigs.errors import EigsError
 from eigs.util.atomic import atomic_path
 
@@ -96,17 +97,7 @@ def write_poses(poses: LatentPoses, path: str | os.PathLike) -> None:
 
 
 def _open(path: str | os.PathLike, fmt: str, what: str) -> h5py.File:
-    p = Path(path)
-    if not p.exists():
-        raise EigsError(p, f"no such {what} file (run the sfm stage first)")
-    try:
-        f = h5py.File(p, "r")
-    except OSError as err:
-        raise EigsError(p, f"not a readable HDF5 file ({err})") from None
-    if f.attrs.get("format") != fmt or int(f.attrs.get("version", -1)) != FORMAT_VERSION:
-        f.close()
-        raise EigsError(p, f"not an eigs {what} file of version {FORMAT_VERSION}")
-    return f
+    return open_artifact(path, fmt, FORMAT_VERSION, what, "sfm")
 
 
 def read_poses(path: str | os.PathLike) -> LatentPoses:

@@ -14,6 +14,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from eigs.artifacts._h5 import open_artifact
 from eigs.errors import EigsError
 from eigs.util.atomic import atomic_path
 
@@ -178,12 +179,8 @@ def read_edi(path: str | os.PathLike, *, latent: bool = True) -> EdiResult:
     """Read and validate. ``latent=False`` skips the large arrays: ``latent`` comes back as (V, L, 0, 0, C)
     and ``cum_counts`` as (V, L, 0, 0), everything else in full."""
     p = Path(path)
-    if not p.exists():
-        raise EigsError(p, "no such EDI file (run the edi stage first)")
     try:
-        with h5py.File(p, "r") as f:
-            if f.attrs.get("format") != FORMAT_NAME or int(f.attrs.get("version", -1)) != FORMAT_VERSION:
-                raise EigsError(p, "not an eigs EDI file of version 1")
+        with open_artifact(p, FORMAT_NAME, FORMAT_VERSION, "EDI", "edi") as f:
             lat = (
                 f["latent"][()]
                 if latent
