@@ -1,6 +1,7 @@
 # Shared helpers: config validation, scene lists, wildcard constraints, stage targets.
 import json
 import re
+import shlex
 
 from snakemake.utils import validate
 
@@ -96,3 +97,46 @@ def edi_options(wildcards):
     if e.get("threshold") is not None:
         opts.append(f"--threshold {float(e['threshold'])}")
     return " ".join(opts)
+
+
+# --- train (rules/train.smk) ----------------------------------------------------------------------------------
+RUNS = config.get("runs", {})
+# GPUs a training job asks for: the workflow profile caps `gpu` at 0 on CPU machines, so the default here is 0;
+# a GPU profile (or `--set-resources train:gpu=1`) raises it and the job's device follows what it was given.
+TRAIN_GPUS = int(config.get("train_gpus", 0))
+
+
+def run_bins(run):
+    """B of a run (its `bins:`, else the first configured EDI bins)."""
+    return int(RUNS[run].get("bins", edi_bins()[0]))
+
+
+def scene_has_ground_truth(scene):
+    s = SCENES[scene]
+    return "builtin" in s or s.get("format") == "e2nerf-synthetic"
+
+
+def run_scenes(run):
+    """Scenes a run is trained on: its `scenes:` list, else every scene (methods that train on ground truth,
+    such as `oracle`, only on scenes that have it)."""
+    spec = RUNS[run]
+    if "scenes" in spec:
+        return [s for s in spec["scenes"] if s in SCENES]
+    if spec["method"] == "oracle":
+        return [s for s in ALL_SCENES if scene_has_ground_truth(s)]
+    return ALL_SCENES
+
+
+def train_targets():
+    return [
+        f"results/{scene}/b{run_bins(run)}/{run}/model.ply" for run in sorted(RUNS) for scene in run_scenes(run)
+    ]
+
+
+def train_config_json(wildcards):
+    """The run's method and options as one shell-quoted JSON object for `eigs train --config`."""
+    spec = RUNS[wildcards.run]
+    if int(wildcards.bins) != run_bins(wildcards.run):
+        raise ValueError(f"run {wildcards.run} is configured for B = {run_bins(wildcards.run)}, not {wildcards.bins}")
+    values = {"method": spec["method"], **spec.get("options", {})}
+    return shlex.quote(json.dumps(values, sort_keys=True, separators=(",", ":")))

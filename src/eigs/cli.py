@@ -25,6 +25,8 @@ COMMANDS: dict[str, str] = {
     "edi": "eigs.events.cli",
     "sfm": "eigs.sfm.cli",
     "init": "eigs.sfm.init_cli",
+    "train": "eigs.train.cli",
+    "render": "eigs.train.render_cli",
     "metric": "eigs.metrics.cli",
     "resources": "eigs.metrics.resources_cli",
 }

@@ -1,0 +1,118 @@
+"""Per-step cost of Gaussian training, broken down, and how it grows with Gaussians and image size.
+
+Writes the "train-step" section of docs/benchmarks.md. Needs a built-in scene's artifacts (default
+``results/chair``: run ``snakemake --cores 2 all_sfm`` first, or pass ``--results DIR``).
+
+Run: ``.venv/bin/python bench/train.py [--results results/chair] [--threads 2]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from bench._report import table, write_section  # noqa: E402
+from eigs.artifacts.gaussians import GaussianCloud  # noqa: E402
+from eigs.losses import photometric_loss  # noqa: E402
+from eigs.train.config import TrainConfig  # noqa: E402
+from eigs.train.data import load_train_data  # noqa: E402
+from eigs.train.loop import Trainer  # noqa: E402
+
+
+def resized_cloud(cloud: GaussianCloud, n: int, seed: int = 0) -> GaussianCloud:
+    """``n`` Gaussians drawn (with replacement beyond the cloud's size) from ``cloud``, jittered slightly."""
+    import numpy as np
+
+    rng = np.random.default_rng(seed)
+    idx = rng.choice(len(cloud), n, replace=n > len(cloud))
+    jitter = rng.normal(0, 1e-3, (n, 3)).astype(np.float32)
+    return GaussianCloud(cloud.means[idx] + jitter, cloud.f_dc[idx], cloud.f_rest[idx], cloud.opacity[idx],
+                         cloud.log_scales[idx], cloud.quats[idx])  # fmt: skip
+
+
+def breakdown(tr: Trainer, repeats: int) -> dict[str, float]:
+    """Median ms of each phase of a 3dgs step: render forward, loss forward+backward, render backward, Adam,
+    densification statistics."""
+    m = tr.method
+    names = ("render fwd", "loss fwd+bwd", "render bwd", "adam", "densify stats", "whole step")
+    phases: dict[str, list[float]] = {k: [] for k in names}
+    for i in range(repeats + 3):
+        s = i % m.n_samples()
+        t0 = time.perf_counter()
+        img, _, info = tr.model.render(m.c2w[s], m.K, tr.data.width, tr.data.height, m.background, 0)
+        info["means2d"].retain_grad()
+        t1 = time.perf_counter()
+        leaf = img.detach().requires_grad_(True)
+        loss, _, _ = photometric_loss(leaf, m.images[s], tr.cfg.lambda_dssim)
+        loss.backward()
+        t2 = time.perf_counter()
+        tr.optimizer.zero_grad(set_to_none=True)
+        img.backward(leaf.grad)
+        t3 = time.perf_counter()
+        tr.optimizer.step()
+        t4 = time.perf_counter()
+        tr.strategy.after_backward(tr.model, [info])
+        t5 = time.perf_counter()
+        tr.train_step()
+        t6 = time.perf_counter()
+        if i >= 3:
+            for k, a, b in (("render fwd", t0, t1), ("loss fwd+bwd", t1, t2), ("render bwd", t2, t3), ("adam", t3, t4),
+                            ("densify stats", t4, t5), ("whole step", t5, t6)):  # fmt: skip
+                phases[k].append((b - a) * 1e3)
+    return {k: statistics.median(v) for k, v in phases.items()}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--results", default="results/chair", help="a scene's results folder (scene.h5, b4/…)")
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--repeats", type=int, default=40)
+    args = ap.parse_args()
+    torch.set_num_threads(args.threads)
+    r = Path(args.results)
+    data = load_train_data(r / "scene.h5", r / "b4" / "edi.h5", r / "b4" / "sfm", r / "b4" / "init.ply")
+    base = data.init
+    cfg = TrainConfig.from_dict({"method": "3dgs", "densify": False})
+    rows = []
+    for n in (5_000, 10_000, 20_000, 40_000):
+        data.init = resized_cloud(base, n)
+        tr = Trainer(data, cfg, torch.device("cpu"))
+        tr.warm_up()
+        b = breakdown(tr, args.repeats)
+        rows.append([f"{n:,}", f"{data.width}×{data.height}"] + [f"{b[k]:.2f}" for k in b])
+    # image size: the same 10k Gaussians, intrinsics scaled
+    data.init = resized_cloud(base, 10_000)
+    w0, h0, k0 = data.width, data.height, data.K.clone()
+    size_rows = []
+    for f in (0.5, 1.0, 2.0):
+        data.width, data.height = int(w0 * f), int(h0 * f)
+        data.K = k0.clone()
+        data.K[:2] *= f
+        tr = Trainer(data, cfg, torch.device("cpu"))
+        tr.method.images = torch.nn.functional.interpolate(
+            tr.method.images.permute(0, 3, 1, 2), size=(data.height, data.width), mode="bilinear", align_corners=False
+        ).permute(0, 2, 3, 1).contiguous()
+        tr.warm_up()
+        b = breakdown(tr, args.repeats)
+        size_rows.append(["10,000", f"{data.width}×{data.height}"] + [f"{b[k]:.2f}" for k in b])
+    cols = ["Gaussians", "image", "render fwd", "loss fwd+bwd", "render bwd", "Adam", "densify stats", "whole step"]
+    md = (
+        f"One `3dgs` training step on `{r.name}`, {args.threads} threads, median of {args.repeats} steps (ms). "
+        "The phases are timed separately (render forward, L1 + D-SSIM forward and backward, rasterizer backward, "
+        "Adam over all parameters, densification statistics); `whole step` is `Trainer.train_step` "
+        "(sampling, the phases, the finiteness guard).\n\n"
+        "By Gaussian count (init cloud resampled):\n\n" + table(cols, rows) + "\n\nBy image size (10k Gaussians):\n\n"
+        + table(cols, size_rows) + "\n"
+    )
+    write_section("train-step", "Training step", md)
+    print(md)
+
+
+if __name__ == "__main__":
+    main()

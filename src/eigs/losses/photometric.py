@@ -1,0 +1,22 @@
+"""The 3DGS photometric loss: (1 − λ)·L1 + λ·(1 − SSIM), SSIM in the ``3dgs`` lineage (``eigs.metrics``)."""
+
+from __future__ import annotations
+
+import torch
+from torch import Tensor
+
+from eigs.metrics.pixel import ssim_torch
+
+
+def photometric_loss(image: Tensor, target: Tensor, lambda_dssim: float = 0.2) -> tuple[Tensor, Tensor, Tensor]:
+    """``image``, ``target``: (H, W, C) in [0, 1]. Returns (loss, l1, dssim), each a scalar tensor.
+
+    ``lambda_dssim = 0`` skips the SSIM (its cost is a few convolutions per channel).
+    """
+    if image.shape != target.shape:
+        raise ValueError(f"image {tuple(image.shape)} and target {tuple(target.shape)} differ")
+    l1 = (image - target).abs().mean()
+    if lambda_dssim == 0:
+        return l1, l1, torch.zeros((), dtype=l1.dtype)
+    dssim = 1.0 - ssim_torch(image.permute(2, 0, 1), target.permute(2, 0, 1))
+    return (1.0 - lambda_dssim) * l1 + lambda_dssim * dssim, l1, dssim

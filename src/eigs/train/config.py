@@ -1,0 +1,110 @@
+"""Training options: :class:`TrainConfig` is the one source of every default (the CLI, the workflow's ``runs:``
+section and ``config.json`` of a run all go through it).
+
+Units: learning rates per Adam step; ``lr_means`` is multiplied by the scene extent (3DGS's spatial learning-rate
+scale; in the canonical frame the RMS camera radius is 1, so the extent is ~1.1); steps are optimiser steps (one
+training sample each); thresholds of densification in the units 3DGS uses (``grow_grad2d`` in NDC, ``grow_scale3d``
+and ``prune_scale3d`` as fractions of the scene extent).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import dataclass, field
+from typing import Any
+
+from eigs.errors import EigsError
+
+
+@dataclass
+class TrainConfig:
+    """Every training hyperparameter, with its default. Method-specific options live in ``method_options``."""
+
+    method: str = "3dgs"
+    steps: int = 3000
+    seed: int = 0
+    sh_degree: int = 0
+    sh_degree_interval: int = 1000  # raise the active SH degree by one every this many steps (3DGS)
+    # Adam learning rates (3DGS defaults except lr_means: the paper's 1.6e-3 for short CPU runs, see docs/training.md)
+    lr_means: float = 1.6e-3
+    lr_means_final: float = 1.6e-5
+    lr_sh0: float = 2.5e-3
+    lr_shN: float = 2.5e-3 / 20
+    lr_opacities: float = 5e-2
+    lr_scales: float = 5e-3
+    lr_quats: float = 1e-3
+    lambda_dssim: float = 0.2
+    # densification (3DGS / gsplat DefaultStrategy semantics; the paper's prune 1e-2, densify 5e-4)
+    densify: bool = True
+    refine_start: int = 300
+    refine_stop_frac: float = 0.6  # stop growing after this fraction of the steps
+    refine_every: int = 100
+    reset_every: int = 0  # opacity reset every this many steps (0 = never: measured better for short runs)
+    grow_grad2d: float = 5e-4
+    grow_scale3d: float = 0.01
+    prune_opacity: float = 1e-2
+    prune_scale3d: float = 0.1
+    max_gaussians: int = 200_000
+    # bookkeeping
+    log_every: int = 50
+    eval_every: int = 250  # held-out PSNR every this many steps (0 = never)
+    checkpoint_every: int = 500
+    max_bad_steps: int = 20  # consecutive non-finite steps before the run stops
+    method_options: dict[str, Any] = field(default_factory=dict)
+
+    def validate(self, where: str = "train config") -> None:
+        checks = [
+            (self.steps >= 1, "steps must be >= 1"),
+            (0 <= self.sh_degree <= 3, "sh_degree must lie in 0..3"),
+            (self.sh_degree_interval >= 1, "sh_degree_interval must be >= 1"),
+            (0 <= self.lambda_dssim <= 1, "lambda_dssim must lie in [0, 1]"),
+            (self.refine_every >= 1, "refine_every must be >= 1"),
+            (0 <= self.refine_stop_frac <= 1, "refine_stop_frac must lie in [0, 1]"),
+            (self.log_every >= 1 and self.checkpoint_every >= 1, "log_every and checkpoint_every must be >= 1"),
+            (self.eval_every >= 0 and self.reset_every >= 0, "eval_every and reset_every must be >= 0"),
+            (self.max_bad_steps >= 1, "max_bad_steps must be >= 1"),
+            (self.max_gaussians >= 1, "max_gaussians must be >= 1"),
+        ]
+        for name in ("lr_means", "lr_means_final", "lr_sh0", "lr_shN", "lr_opacities", "lr_scales", "lr_quats"):
+            checks.append((getattr(self, name) >= 0, f"{name} must be >= 0"))
+        for ok, msg in checks:
+            if not ok:
+                raise EigsError(where, msg)
+
+    @property
+    def refine_stop(self) -> int:
+        return int(self.refine_stop_frac * self.steps)
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, values: dict[str, Any], where: str = "train config") -> TrainConfig:
+        """Build from a (partial) mapping; unknown keys and wrong types raise :class:`EigsError` naming them."""
+        if not isinstance(values, dict):
+            raise EigsError(where, f"expected a mapping of options, got {type(values).__name__}")
+        fields = {f.name: f for f in dataclasses.fields(cls)}
+        unknown = sorted(set(values) - set(fields))
+        if unknown:
+            raise EigsError(where, f"unknown training option(s) {', '.join(unknown)}; known: {', '.join(fields)}")
+        defaults = cls()
+        kw: dict[str, Any] = {}
+        for name, value in values.items():
+            want = type(getattr(defaults, name))
+            if want is float and isinstance(value, int) and not isinstance(value, bool):
+                value = float(value)
+            if not isinstance(value, want) or (want is int and isinstance(value, bool)):
+                raise EigsError(where, f"option {name} must be {want.__name__}, got {value!r}")
+            kw[name] = value
+        cfg = cls(**kw)
+        cfg.validate(where)
+        return cfg
+
+    @classmethod
+    def from_json(cls, text: str, where: str = "train config") -> TrainConfig:
+        try:
+            values = json.loads(text) if text.strip() else {}
+        except json.JSONDecodeError as err:
+            raise EigsError(where, f"not valid JSON ({err})") from None
+        return cls.from_dict(values, where)

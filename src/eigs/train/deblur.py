@@ -1,0 +1,254 @@
+"""Methods that explain a blurry frame by N+1 sharp renders: EiGS (ADE + blur + event + consistency), its
+ablations, Deblurring-GS(+), and E2GS (fixed latent poses). ``docs/methods.md`` lists each method's recipe.
+
+One step on view v: render k = 0 with the Gaussians as they are and k = 1..N with them moved (ADE) — or, for the
+fixed-pose methods, render every latent pose P_k — from the view's reference camera; average the renders in linear
+intensity (Eq. 2/7) and compare with the blurry frame (Eq. 8); add the event loss on consecutive renders
+(Eq. 9–10) and the motion-consistency loss on the displacements (Eq. 3–6), Eq. 11.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from eigs.errors import EigsError
+from eigs.losses import photometric_loss
+from eigs.losses.consistency import DEFAULT_DELTA, DEFAULT_REG, motion_consistency_loss
+from eigs.losses.events import (
+    e2nerf_event_loss,
+    event_integration_loss,
+    from_linear,
+    lin_log,
+    log_intensity,
+    luma,
+    to_linear,
+)
+from eigs.train.ade import ADE
+from eigs.train.config import TrainConfig
+from eigs.train.data import TrainData
+from eigs.train.methods import Method, StepOutput, register
+from eigs.train.model import GaussianModel
+
+# Options every multi-render method takes; each method overrides the defaults of its recipe in RECIPE.
+COMMON_OPTIONS: dict[str, Any] = {
+    "ade": True,  # per-Gaussian displacements from the ADE network (False: render the latent poses P_k)
+    "shape": False,  # ADE also predicts rotation and scale changes (Deblurring-GS+)
+    "event_loss": "eigs",  # "eigs" (Eq. 9–10), "e2nerf" (E²NeRF/E2GS pairwise) or "none"
+    "consistency": True,  # motion-consistency loss (Eq. 3–6)
+    "lambda_p": 1e-2,  # λ_p, scale of the predicted displacements (and rotation/scale changes)
+    "lambda_event": 0.005,
+    "lambda_consis": 1.0,
+    "huber_delta": DEFAULT_DELTA,
+    "consis_reg": DEFAULT_REG,
+    "grad_through_fit": True,
+    "width": 256,
+    "depth": 3,
+    "x_freqs": 4,
+    "pose_freqs": 4,
+    "lr_ade": 1e-3,
+    "pose_prior": False,  # beyond the paper: ADE predicts the residual to the displacement the latent poses imply
+}
+
+
+def rigid_inverse(c2w: Tensor) -> Tensor:
+    """Inverse of a rigid (…, 4, 4) transform."""
+    r, t = c2w[..., :3, :3], c2w[..., :3, 3:]
+    out = torch.zeros_like(c2w)
+    out[..., :3, :3] = r.transpose(-1, -2)
+    out[..., :3, 3:] = -r.transpose(-1, -2) @ t
+    out[..., 3, 3] = 1.0
+    return out
+
+
+class MultiRender(Method):
+    """N+1 renders per step. Subclasses set ``RECIPE`` (option defaults that define the method)."""
+
+    RECIPE: ClassVar[dict[str, Any]] = {}
+    OPTIONS = COMMON_OPTIONS
+
+    def __init_subclass__(cls, **kw: Any) -> None:
+        super().__init_subclass__(**kw)
+        cls.OPTIONS = {**COMMON_OPTIONS, **cls.RECIPE}
+
+    def __init__(self, data: TrainData, cfg: TrainConfig, device: torch.device):
+        super().__init__(data, cfg, device)
+        o = self.options
+        if o["event_loss"] not in ("eigs", "e2nerf", "none"):
+            raise EigsError(f"method {self.name}", f"event_loss must be eigs, e2nerf or none, got {o['event_loss']!r}")
+        if (o["consistency"] or o["shape"] or o["pose_prior"]) and not o["ade"]:
+            raise EigsError(f"method {self.name}", "consistency, shape and pose_prior need the ADE (ade: true)")
+        self.views = data.reference_views()
+        if self.views.size == 0:
+            raise EigsError(data.scene.name, f"method {self.name}: no view has a valid reference pose")
+        self.n_latent = data.n_latent
+        # latent poses with invalid entries replaced by the view's reference pose
+        c2w = data.c2w.clone()
+        bad = torch.from_numpy(~data.valid)
+        c2w[bad] = c2w[:, :1].expand_as(c2w)[bad]
+        self.c2w = c2w  # (V, L, 4, 4) float64
+        self.blurry = data.blurry.to(device)
+        self.response = data.camera_response
+        edi = data.edi
+        self.edi_mode = edi.mode
+        self.counts = torch.from_numpy(edi.cum_counts).to(device)  # (V, L, H, W) int32
+        self.event_mask = torch.from_numpy(edi.event_mask).to(device) if edi.event_mask is not None else None
+        if edi.threshold_pos_map is not None and edi.threshold_neg_map is not None:
+            self.c_maps: tuple[Tensor, Tensor] | None = (
+                torch.from_numpy(edi.threshold_pos_map).float().to(device),
+                torch.from_numpy(edi.threshold_neg_map).float().to(device),
+            )
+        else:
+            self.c_maps = None
+        self.threshold = torch.from_numpy(np.asarray(edi.threshold, np.float64)).float()
+        self.ade: ADE | None = None
+        if o["ade"]:
+            self.ade = ADE(
+                n_latent=self.n_latent,
+                n_moved=self.n_latent - 1,
+                width=int(o["width"]),
+                depth=int(o["depth"]),
+                x_freqs=int(o["x_freqs"]),
+                pose_freqs=int(o["pose_freqs"]),
+                out_per_latent=10 if o["shape"] else 3,
+            ).to(device)
+            self.pose_inputs = torch.stack([self.ade.encode_poses(self.c2w[v]) for v in range(data.n_views)]).to(device)
+            # P_0 · P_k⁻¹ moves the Gaussians the way the camera moved from P_0 to P_k (for the pose prior)
+            self.relative = (self.c2w[:, :1] @ rigid_inverse(self.c2w[:, 1:])).float().to(device)  # (V, N, 4, 4)
+
+    # ------------------------------------------------------------------ registry hooks
+    def n_samples(self) -> int:
+        return int(self.views.size)
+
+    def param_groups(self) -> list[dict]:
+        if self.ade is None:
+            return []
+        return [{"params": list(self.ade.parameters()), "lr": float(self.options["lr_ade"]), "name": "ade"}]
+
+    def state_dict(self) -> dict:
+        return {"ade": self.ade.state_dict()} if self.ade is not None else {}
+
+    def load_state_dict(self, state: dict) -> None:
+        if self.ade is not None:
+            self.ade.load_state_dict(state["ade"])
+
+    # ------------------------------------------------------------------ one step
+    def thresholds(self, v: int) -> tuple[Tensor | float, Tensor | float]:
+        if self.c_maps is not None:
+            return self.c_maps
+        c = float(self.threshold[v])
+        return c, c
+
+    def renders(self, model: GaussianModel, v: int, sh_degree: int) -> tuple[list[Tensor], list[dict], Tensor | None]:
+        """The L = N+1 renders of view v, their infos, and the raw ADE displacements (N_G, N, 3) or None."""
+        d, o = self.data, self.options
+        images, infos = [], []
+
+        def render(c2w: Tensor, **moved: Tensor) -> None:
+            img, _, info = model.render(c2w, self.K, d.width, d.height, self.background, sh_degree, **moved)
+            info["means2d"].retain_grad()
+            images.append(img)
+            infos.append(info)
+
+        if self.ade is None:
+            for k in range(self.n_latent):
+                render(self.c2w[v, k])
+            return images, infos, None
+        p = model.params
+        x = p["means"].detach()
+        out = self.ade(x, self.pose_inputs[v])  # (N_G, N, 3 or 10)
+        dx = out[..., :3]
+        lam = float(o["lambda_p"])
+        render(self.c2w[v, 0])
+        for k in range(1, self.n_latent):
+            means = p["means"] + lam * dx[:, k - 1]
+            if o["pose_prior"]:
+                rel = self.relative[v, k - 1]
+                means = means + (x @ rel[:3, :3].T + rel[:3, 3] - x)
+            moved = {"means": means}
+            if o["shape"]:
+                moved["quats"] = p["quats"] + lam * out[:, k - 1, 3:7]
+                moved["log_scales"] = p["log_scales"] + lam * out[:, k - 1, 7:10]
+            render(self.c2w[v, 0], **moved)
+        return images, infos, dx
+
+    def step(self, model: GaussianModel, sample: int, step: int, sh_degree: int) -> StepOutput:
+        o = self.options
+        v = int(self.views[sample])
+        images, infos, dx = self.renders(model, v, sh_degree)
+        stack = torch.stack(images)  # (L, H, W, C)
+        blur = from_linear(to_linear(stack, self.response).mean(dim=0), self.response)
+        loss, l1, dssim = photometric_loss(blur, self.blurry[v], self.cfg.lambda_dssim)
+        terms = {"l1": l1.item(), "dssim": dssim.item()}
+        if o["event_loss"] == "eigs":
+            logs = log_intensity(stack, self.response, self.edi_mode)  # (L, H, W)
+            counts = self.counts[v]
+            c_pos, c_neg = self.thresholds(v)
+            ev = torch.stack([
+                event_integration_loss(logs[k], logs[k + 1], counts[k + 1] - counts[k], c_pos, c_neg, self.event_mask)
+                for k in range(self.n_latent - 1)
+            ]).mean()  # fmt: skip
+            loss = loss + float(o["lambda_event"]) * ev
+            terms["event"] = ev.item()
+        elif o["event_loss"] == "e2nerf":
+            logs = lin_log(255.0 * luma(stack.clamp(0, 1)))
+            ev = e2nerf_event_loss(logs, self.counts[v])
+            loss = loss + float(o["lambda_event"]) * ev
+            terms["event"] = ev.item()
+        if o["consistency"] and dx is not None:
+            x = model.params["means"].detach()
+            cons = torch.stack([
+                motion_consistency_loss(x, dx[:, k], reg=float(o["consis_reg"]), delta=float(o["huber_delta"]),
+                                        grad_through_fit=bool(o["grad_through_fit"]))
+                for k in range(dx.shape[1])
+            ]).mean()  # fmt: skip
+            loss = loss + float(o["lambda_consis"]) * cons
+            terms["consis"] = cons.item()
+        if dx is not None:
+            terms["disp"] = float(o["lambda_p"]) * dx.detach().norm(dim=-1).mean().item()
+        return StepOutput(loss, terms, infos)
+
+
+@register
+class EiGS(MultiRender):
+    name = "eigs"
+    description = "EiGS: ADE displacements, blur + event-integration + motion-consistency losses"
+    RECIPE = {}
+
+
+@register
+class EiGSb(MultiRender):
+    name = "eigs-b"
+    description = "EiGS without the motion-consistency loss (Table II (b))"
+    RECIPE = {"consistency": False}
+
+
+@register
+class EiGSminus(MultiRender):
+    name = "eigs-minus"
+    description = "EiGS without the event loss (Table II Ours−)"
+    RECIPE = {"event_loss": "none"}
+
+
+@register
+class DeblurringGS(MultiRender):
+    name = "deblurring-gs"
+    description = "Deblurring-GS: ADE displacements and the blur loss only (Table II (a))"
+    RECIPE = {"event_loss": "none", "consistency": False}
+
+
+@register
+class DeblurringGSPlus(MultiRender):
+    name = "deblurring-gs+"
+    description = "Deblurring-GS+: ADE also predicts rotation and scale changes, blur loss only"
+    RECIPE = {"event_loss": "none", "consistency": False, "shape": True}
+
+
+@register
+class E2GS(MultiRender):
+    name = "e2gs"
+    description = "E2GS (w/ est. poses): renders at the N+1 fixed latent poses, blur + E²NeRF-style event loss"
+    RECIPE = {"ade": False, "consistency": False, "event_loss": "e2nerf", "lambda_event": 0.02}

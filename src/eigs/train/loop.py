@@ -1,0 +1,288 @@
+"""The training loop shared by every method: sample, render, loss, backward, guard, densify, Adam; a log of time
+against held-out quality; checkpoints that make a killed run resume to the same result; atomic final outputs.
+
+Run folder (``RUN_DIR``): ``model.ply`` (3DGS PLY), ``config.json`` (resolved options and run facts),
+``train_log.csv``. Checkpoints go to the sibling ``RUN_DIR.partial/`` (Snakemake deletes a failed job's declared
+outputs, not this), which is removed once the run folder is complete.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import logging
+import math
+import shutil
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from eigs import __version__
+from eigs.artifacts.gaussians import write_gaussian_ply
+from eigs.errors import EigsError
+from eigs.metrics.pixel import psnr_torch
+from eigs.train.config import TrainConfig
+from eigs.train.data import HeldOut, TrainData
+from eigs.train.methods import Method, make_method
+from eigs.train.model import PARAM_NAMES, GaussianModel, make_optimizer, means_lr, scene_extent
+from eigs.train.strategy import DensifyStrategy
+from eigs.util.atomic import atomic_path
+from eigs.util.progress import progress
+
+log = logging.getLogger(__name__)
+
+CHECKPOINT_VERSION = 1
+LOG_COLUMNS = ("step", "wall_s", "loss", "n_gaussians", "psnr_novel", "psnr_blur")
+
+
+@dataclass
+class RunResult:
+    model: GaussianModel
+    method: Method
+    rows: list[dict[str, Any]]
+    train_seconds: float
+    skipped_steps: int
+
+
+def partial_dir_of(run_dir: str | Path) -> Path:
+    run_dir = Path(run_dir)
+    return run_dir.with_name(run_dir.name + ".partial")
+
+
+@torch.no_grad()
+def held_out_psnr(model: GaussianModel, held: HeldOut, data: TrainData, sh_degree: int, device: torch.device) -> dict:
+    """Mean per-image PSNR (dB) of 8-bit renders on the held-out novel views and blur views (NaN when none)."""
+    out: dict[str, list[float]] = {"psnr_novel": [], "psnr_blur": []}
+    bg = data.background.to(device)
+    for i in range(len(held)):
+        img, _, _ = model.render(held.c2w[i], held.K[i].to(device), data.width, data.height, bg, sh_degree)
+        img = torch.round(img.clamp(0, 1) * 255.0) / 255.0
+        p = float(psnr_torch(img.permute(2, 0, 1).cpu(), held.images[i].permute(2, 0, 1)))
+        out["psnr_novel" if held.kind[i] == 1 else "psnr_blur"].append(p)
+    return {k: (float(np.mean(v)) if v else math.nan) for k, v in out.items()}
+
+
+def _finite_grads(params: list[torch.Tensor]) -> bool:
+    grads = [p.grad for p in params if p.grad is not None]
+    if not grads:
+        return True
+    return bool(torch.stack([torch.isfinite(g).all() for g in grads]).all())
+
+
+class Trainer:
+    """One run: state, one step, checkpoints."""
+
+    def __init__(self, data: TrainData, cfg: TrainConfig, device: torch.device):
+        self.data, self.cfg, self.device = data, cfg, device
+        torch.manual_seed(cfg.seed)
+        self.model = GaussianModel.from_cloud(data.init, cfg.sh_degree, data.channels, device)
+        centres = data.c2w[..., :3, 3].reshape(-1, 3).numpy()
+        self.extent = scene_extent(centres)
+        self.method = make_method(data, cfg, device)
+        self.optimizer = make_optimizer(self.model, cfg, self.extent)
+        for group in self.method.param_groups():
+            self.optimizer.add_param_group(group)
+        self.strategy = DensifyStrategy(cfg, self.extent, data.width, data.height, seed=cfg.seed)
+        self.rng = np.random.default_rng(cfg.seed)
+        self.order: list[int] = []
+        self.step = 0
+        self.rows: list[dict[str, Any]] = []
+        self.wall = 0.0
+        self.bad = 0
+        self.skipped = 0
+
+    # ------------------------------------------------------------------ checkpoints
+    def state_dict(self) -> dict:
+        return {
+            "version": CHECKPOINT_VERSION,
+            "config": self.cfg.to_dict(),
+            "step": self.step,
+            "params": {n: t.detach().cpu() for n, t in self.model.params.items()},
+            "optimizer": self.optimizer.state_dict(),
+            "strategy": self.strategy.state_dict(),
+            "method": self.method.state_dict(),
+            "rng": self.rng.bit_generator.state,
+            "torch_rng": torch.get_rng_state(),
+            "order": [int(i) for i in self.order],
+            "rows": self.rows,
+            "wall": self.wall,
+            "bad": self.bad,
+            "skipped": self.skipped,
+        }
+
+    def save_checkpoint(self, path: Path) -> None:
+        with atomic_path(path) as tmp:
+            torch.save(self.state_dict(), tmp)
+
+    def load_checkpoint(self, path: Path) -> bool:
+        """Resume from ``path``; False (and a warning) when it belongs to another configuration or is unreadable."""
+        try:
+            state = torch.load(path, map_location="cpu", weights_only=False)
+        except Exception as err:  # a truncated or foreign file: start over rather than fail
+            log.warning("ignoring unreadable checkpoint %s (%s)", path, err)
+            return False
+        if state.get("version") != CHECKPOINT_VERSION or state.get("config") != self.cfg.to_dict():
+            log.warning("ignoring checkpoint %s: written for another configuration", path)
+            return False
+        for name in PARAM_NAMES:
+            self.model.params[name] = state["params"][name].to(self.device).requires_grad_(True)
+        self.optimizer = make_optimizer(self.model, self.cfg, self.extent)
+        for group in self.method.param_groups():
+            self.optimizer.add_param_group(group)
+        self.method.load_state_dict(state["method"])
+        self.optimizer.load_state_dict(state["optimizer"])
+        self.strategy.load_state_dict(state["strategy"])
+        self.rng.bit_generator.state = state["rng"]
+        torch.set_rng_state(state["torch_rng"])
+        self.order = list(state["order"])
+        self.step, self.rows, self.wall = int(state["step"]), list(state["rows"]), float(state["wall"])
+        self.bad, self.skipped = int(state["bad"]), int(state["skipped"])
+        log.info("resumed from %s at step %d", path, self.step)
+        return True
+
+    # ------------------------------------------------------------------ one step
+    @torch.no_grad()
+    def warm_up(self) -> None:
+        """One untimed render, so a first-use build of the rasterizer does not count as training time."""
+        d = self.data
+        c2w = d.c2w[int(d.reference_views()[0]), 0]
+        self.model.render(c2w, d.K.to(self.device), d.width, d.height, d.background.to(self.device), 0)
+
+    def sh_degree_at(self, step: int) -> int:
+        return min(self.cfg.sh_degree, step // self.cfg.sh_degree_interval)
+
+    def train_step(self) -> bool:
+        """Run step ``self.step``; False when it was skipped (non-finite loss or gradient)."""
+        cfg, step = self.cfg, self.step
+        if not self.order:
+            self.order = [int(i) for i in self.rng.permutation(self.method.n_samples())]
+        sample = self.order.pop()
+        for group in self.optimizer.param_groups:
+            if group.get("name") == "means":
+                group["lr"] = means_lr(cfg, self.extent, step)
+        out = self.method.step(self.model, sample, step, self.sh_degree_at(step))
+        self.optimizer.zero_grad(set_to_none=True)
+        ok = bool(torch.isfinite(out.loss))
+        if ok:
+            out.loss.backward()
+            params = [p for g in self.optimizer.param_groups for p in g["params"]]
+            ok = _finite_grads(params)
+        self.step += 1
+        if not ok:
+            self.optimizer.zero_grad(set_to_none=True)
+            self.bad += 1
+            self.skipped += 1
+            log.warning("step %d: non-finite loss or gradient, skipped (%d in a row)", step, self.bad)
+            return False
+        self.bad = 0
+        if self.strategy.active(step):
+            self.strategy.after_backward(self.model, out.infos)
+        self.optimizer.step()
+        report = self.strategy.after_step(self.step, self.model, self.optimizer)
+        if report is not None and (report.cloned or report.split or report.pruned):
+            log.debug("step %d: cloned %d, split %d, pruned %d -> %d Gaussians", self.step, report.cloned,
+                      report.split, report.pruned, len(self.model))  # fmt: skip
+        self._last = {"loss": out.loss.item(), **out.terms}
+        return True
+
+
+def train(
+    data: TrainData,
+    cfg: TrainConfig,
+    run_dir: str | Path,
+    device: torch.device | None = None,
+    *,
+    inputs: dict[str, str] | None = None,
+    stop_after: int | None = None,
+) -> RunResult:
+    """Train ``cfg.method`` on ``data`` and write the run folder. ``stop_after``: leave after this many steps
+    (checkpoint written, no outputs) — for tests of resumption."""
+    device = device or torch.device("cpu")
+    run_dir = Path(run_dir)
+    partial = partial_dir_of(run_dir)
+    ckpt = partial / "checkpoint.pt"
+    tr = Trainer(data, cfg, device)
+    if ckpt.exists():
+        tr.load_checkpoint(ckpt)
+    log.info(
+        "%s: %d steps, %d samples, %d Gaussians, extent %.3f, device %s",
+        cfg.method, cfg.steps, tr.method.n_samples(), len(tr.model), tr.extent, device,
+    )  # fmt: skip
+    tr._last = {}
+    tr.warm_up()
+    for _ in progress(range(tr.step, cfg.steps), desc=f"train {cfg.method}", total=cfg.steps - tr.step, unit="step"):
+        t0 = time.perf_counter()
+        tr.train_step()
+        tr.wall += time.perf_counter() - t0
+        if tr.bad >= cfg.max_bad_steps:
+            tr.save_checkpoint(ckpt)
+            raise EigsError(
+                run_dir,
+                f"{tr.bad} consecutive steps had a non-finite loss or gradient (last at step {tr.step}); the last "
+                f"good state is in {ckpt}",
+            )
+        s = tr.step
+        evaluate = data.held_out is not None and cfg.eval_every and (s % cfg.eval_every == 0 or s == cfg.steps)
+        if s % cfg.log_every == 0 or s == cfg.steps or evaluate:
+            row: dict[str, Any] = {"step": s, "wall_s": round(tr.wall, 4), **tr._last, "n_gaussians": len(tr.model)}
+            if evaluate:
+                row.update(held_out_psnr(tr.model, data.held_out, data, tr.sh_degree_at(s), device))  # type: ignore[arg-type]
+                log.info("step %d  %.1f s  %d Gaussians  PSNR novel %.2f dB", s, tr.wall, len(tr.model),
+                         row["psnr_novel"])  # fmt: skip
+            tr.rows.append(row)
+        if s % cfg.checkpoint_every == 0 and s < cfg.steps:
+            tr.save_checkpoint(ckpt)
+        if stop_after is not None and s >= stop_after:
+            tr.save_checkpoint(ckpt)
+            return RunResult(tr.model, tr.method, tr.rows, tr.wall, tr.skipped)
+    write_run(tr, run_dir, inputs or {})
+    shutil.rmtree(partial, ignore_errors=True)
+    return RunResult(tr.model, tr.method, tr.rows, tr.wall, tr.skipped)
+
+
+def log_csv(rows: list[dict[str, Any]]) -> str:
+    """The rows as CSV: fixed columns first, then each method's loss terms in first-seen order."""
+    extra: list[str] = []
+    for r in rows:
+        for k in r:
+            if k not in LOG_COLUMNS and k not in extra:
+                extra.append(k)
+    columns = [*LOG_COLUMNS[:3], *extra, *LOG_COLUMNS[3:]]
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=columns, restval="", lineterminator="\n")
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: ("" if isinstance(v, float) and math.isnan(v) else v) for k, v in r.items()})
+    return buf.getvalue()
+
+
+def write_run(tr: Trainer, run_dir: Path, inputs: dict[str, str]) -> None:
+    """Write ``model.ply``, ``config.json`` and ``train_log.csv`` together (atomic directory rename)."""
+    import platform
+
+    facts = {
+        "eigs_version": __version__,
+        "torch_version": torch.__version__,
+        "device": str(tr.device),
+        "threads": torch.get_num_threads(),
+        "machine": platform.machine(),
+        "method_description": tr.method.description,
+        "method_options": tr.method.options,
+        "scene": tr.data.scene.name,
+        "n_samples": tr.method.n_samples(),
+        "extent": tr.extent,
+        "train_seconds": round(tr.wall, 3),
+        "skipped_steps": tr.skipped,
+        "n_gaussians": len(tr.model),
+        "final": tr.rows[-1] if tr.rows else {},
+    }
+    doc = {"train": tr.cfg.to_dict(), "inputs": inputs, "run": facts}
+    with atomic_path(run_dir, directory=True) as tmp:
+        write_gaussian_ply(tr.model.to_cloud(), tmp / "model.ply")
+        (tmp / "config.json").write_text(json.dumps(doc, indent=2, default=float) + "\n")
+        (tmp / "train_log.csv").write_text(log_csv(tr.rows))

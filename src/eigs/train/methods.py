@@ -1,0 +1,159 @@
+"""The method registry: a method name → how one training step explains its target (what it renders, the loss).
+
+Every method shares the model, optimiser, densification and budget of :mod:`eigs.train.loop`; a method only says
+which samples a step draws from and how it turns renders into a loss. Add a method by subclassing :class:`Method`
+and decorating it with :func:`register`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from eigs.errors import EigsError
+from eigs.losses import photometric_loss
+from eigs.train.config import TrainConfig
+from eigs.train.data import TrainData
+from eigs.train.model import GaussianModel
+
+
+@dataclass
+class StepOutput:
+    """One step's loss, the terms to log (floats) and the rasterizer infos of its renders (for densification)."""
+
+    loss: Tensor
+    terms: dict[str, float]
+    infos: list[dict] = field(default_factory=list)
+
+
+class Method:
+    """Base class. ``options``: the method's own options (``TrainConfig.method_options``), validated against
+    ``OPTIONS`` (name → default)."""
+
+    name: ClassVar[str] = ""
+    description: ClassVar[str] = ""
+    needs_ground_truth: ClassVar[bool] = False
+    OPTIONS: ClassVar[dict[str, Any]] = {}
+
+    def __init__(self, data: TrainData, cfg: TrainConfig, device: torch.device):
+        unknown = sorted(set(cfg.method_options) - set(self.OPTIONS))
+        if unknown:
+            raise EigsError(
+                f"method {self.name}",
+                f"unknown option(s) {', '.join(unknown)}; known: {', '.join(self.OPTIONS) or 'none'}",
+            )
+        self.options = {**self.OPTIONS, **cfg.method_options}
+        self.data = data
+        self.cfg = cfg
+        self.device = device
+        self.K = data.K.to(device)
+        self.background = data.background.to(device)
+
+    def n_samples(self) -> int:
+        raise NotImplementedError
+
+    def step(self, model: GaussianModel, sample: int, step: int, sh_degree: int) -> StepOutput:
+        raise NotImplementedError
+
+    def param_groups(self) -> list[dict]:
+        """Extra Adam param groups (e.g. a network), each with ``name`` and ``lr``."""
+        return []
+
+    def state_dict(self) -> dict:
+        return {}
+
+    def load_state_dict(self, state: dict) -> None:
+        pass
+
+
+REGISTRY: dict[str, type[Method]] = {}
+
+
+def register(cls: type[Method]) -> type[Method]:
+    if not cls.name or cls.name in REGISTRY:
+        raise ValueError(f"method name {cls.name!r} empty or registered twice")
+    REGISTRY[cls.name] = cls
+    return cls
+
+
+def _load_all() -> None:
+    """Import the modules that register methods beyond this one's."""
+    import eigs.train.deblur  # noqa: F401
+
+
+def make_method(data: TrainData, cfg: TrainConfig, device: torch.device) -> Method:
+    _load_all()
+    cls = REGISTRY.get(cfg.method)
+    if cls is None:
+        raise EigsError("train", f"unknown method {cfg.method!r}; known: {', '.join(sorted(REGISTRY))}")
+    if cls.needs_ground_truth and data.sharp_train is None:
+        raise EigsError(data.scene.name, f"method {cfg.method} needs ground-truth sharp images of the training views")
+    return cls(data, cfg, device)
+
+
+class ImageMethod(Method):
+    """One render per step at a sample's camera, L1 + D-SSIM against the sample's image."""
+
+    def __init__(self, data: TrainData, cfg: TrainConfig, device: torch.device):
+        super().__init__(data, cfg, device)
+        images, c2w = self.samples()
+        if images.shape[0] == 0:
+            raise EigsError(data.scene.name, f"method {self.name}: no training sample has a valid pose")
+        self.images = images.to(device)  # (S, H, W, C)
+        self.c2w = c2w  # (S, 4, 4) float64
+
+    def samples(self) -> tuple[Tensor, Tensor]:
+        """(S, H, W, C) target images and (S, 4, 4) float64 camera-to-world."""
+        raise NotImplementedError
+
+    def n_samples(self) -> int:
+        return int(self.images.shape[0])
+
+    def step(self, model: GaussianModel, sample: int, step: int, sh_degree: int) -> StepOutput:
+        d = self.data
+        image, _, info = model.render(self.c2w[sample], self.K, d.width, d.height, self.background, sh_degree)
+        info["means2d"].retain_grad()
+        loss, l1, dssim = photometric_loss(image, self.images[sample], self.cfg.lambda_dssim)
+        return StepOutput(loss, {"l1": l1.item(), "dssim": dssim.item()}, [info])
+
+
+@register
+class Blurry3DGS(ImageMethod):
+    name = "3dgs"
+    description = "3D Gaussian Splatting on the blurry frames at the reference pose (latent k = 0)"
+
+    def samples(self) -> tuple[Tensor, Tensor]:
+        views = self.data.reference_views()
+        return self.data.blurry[views], self.data.c2w[views, 0]
+
+
+@register
+class Edi3DGS(ImageMethod):
+    name = "edi-3dgs"
+    description = "3DGS on the EDI latent sharp frames at their latent poses (the analogue of EDI-NeRF)"
+
+    def samples(self) -> tuple[Tensor, Tensor]:
+        v, k = np.nonzero(self.data.valid)
+        return self.data.latent[v, k], self.data.c2w[v, k]
+
+
+@register
+class Oracle(ImageMethod):
+    name = "oracle"
+    description = "upper bound: the ground-truth sharp images of the training views at their reference pose"
+    needs_ground_truth = True
+
+    def samples(self) -> tuple[Tensor, Tensor]:
+        d = self.data
+        views = np.nonzero(d.valid[:, 0] & d.has_sharp_train)[0]
+        return d.sharp_train[views], d.c2w[views, 0]  # type: ignore[index]
+
+
+def method_names() -> list[str]:
+    _load_all()
+    return sorted(REGISTRY)
+

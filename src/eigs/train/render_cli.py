@@ -1,0 +1,120 @@
+"""``eigs render``: render a trained run's ``model.ply`` at the test cameras, the training views' reference poses
+or an orbit, write 8-bit PNGs and report frames per second."""
+
+from __future__ import annotations
+
+import argparse
+
+HELP = "render a trained run (test cameras, training views or an orbit) to PNGs and report FPS"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("run", help="run folder (model.ply, config.json)")
+    p.add_argument("scene", help="scene file (scene.h5): camera, background")
+    p.add_argument("sfm", help="SfM output directory (poses.h5, test_cameras.h5)")
+    p.add_argument("--cameras", default="test", choices=("test", "train", "orbit"), help="which cameras")
+    p.add_argument("--frames", type=int, default=60, help="orbit frames (default 60)")
+    p.add_argument("-o", "--output", required=True, help="output directory of PNGs and render_report.json")
+    p.add_argument("--device", default="auto", choices=("auto", "cpu", "cuda"))
+
+
+def orbit_cameras(c2w: np.ndarray, n: int) -> np.ndarray:  # noqa: F821 (numpy imported lazily)
+    """(n, 4, 4) cameras on a circle through the training cameras' mean radius and height, looking at the point
+    closest to every training camera's optical axis; ``c2w`` (M, 4, 4) valid training cameras, OpenCV axes."""
+    import numpy as np
+
+    centres, fwd = c2w[:, :3, 3], c2w[:, :3, 2]
+    # the point closest (least squares) to every optical axis
+    a = np.zeros((3, 3))
+    b = np.zeros(3)
+    for c, d in zip(centres, fwd, strict=True):
+        proj = np.eye(3) - np.outer(d, d)
+        a += proj
+        b += proj @ c
+    target = np.linalg.lstsq(a + 1e-9 * np.eye(3), b, rcond=None)[0]
+    up = -c2w[:, :3, 1].mean(axis=0)  # OpenCV y points down
+    up /= max(np.linalg.norm(up), 1e-12)
+    rel = centres - target
+    height = float((rel @ up).mean())
+    radial = rel - np.outer(rel @ up, up)
+    radius = float(np.linalg.norm(radial, axis=1).mean())
+    e1 = radial[0] / max(np.linalg.norm(radial[0]), 1e-12)
+    e2 = np.cross(up, e1)
+    out = np.zeros((n, 4, 4))
+    for i, phi in enumerate(np.linspace(0.0, 2 * np.pi, n, endpoint=False)):
+        c = target + height * up + radius * (np.cos(phi) * e1 + np.sin(phi) * e2)
+        z = target - c
+        z /= max(np.linalg.norm(z), 1e-12)
+        x = np.cross(z, up)
+        x /= max(np.linalg.norm(x), 1e-12)
+        y = np.cross(z, x)
+        out[i, :3, :3] = np.stack([x, y, z], axis=1)
+        out[i, :3, 3] = c
+        out[i, 3, 3] = 1.0
+    return out
+
+
+def run(args: argparse.Namespace) -> int:
+    import json
+    import logging
+    import time
+    from pathlib import Path
+
+    import numpy as np
+    import torch
+
+    from eigs.artifacts.gaussians import read_gaussian_ply
+    from eigs.artifacts.poses import read_poses, read_test_cameras
+    from eigs.errors import EigsError
+    from eigs.scene import read_scene
+    from eigs.train.model import GaussianModel
+    from eigs.util.atomic import atomic_path
+    from eigs.util.image import write_png
+
+    log = logging.getLogger("eigs.render")
+    run_dir = Path(args.run)
+    cfg_path = run_dir / "config.json"
+    if not cfg_path.is_file():
+        raise EigsError(run_dir, "no config.json (not a finished run folder; run `eigs train` first)")
+    try:
+        sh_degree = int(json.loads(cfg_path.read_text())["train"]["sh_degree"])
+    except (ValueError, KeyError, TypeError) as err:
+        raise EigsError(cfg_path, f"unreadable run config ({err})") from None
+    scene = read_scene(args.scene, events=False)
+    cloud = read_gaussian_ply(run_dir / "model.ply")
+    device = torch.device("cuda" if args.device == "cuda" or (args.device == "auto" and torch.cuda.is_available())
+                          else "cpu")  # fmt: skip
+    model = GaussianModel.from_cloud(cloud, sh_degree, scene.channels, device)
+    c = scene.channels
+    bg = torch.tensor(np.asarray(scene.background if scene.background is not None else np.zeros(c), np.float32))
+    poses = read_poses(args.sfm)
+    w, h = poses.width, poses.height
+    if args.cameras == "test":
+        tc = read_test_cameras(args.sfm)
+        c2w, ks = tc.c2w, tc.K
+        names = [f"test_{i:04d}.png" for i in range(len(tc))]
+    else:
+        valid = poses.valid[:, 0]
+        if args.cameras == "train":
+            c2w = poses.c2w[valid, 0]
+            names = [f"train_{v:04d}.png" for v in np.nonzero(valid)[0]]
+        else:
+            c2w = orbit_cameras(poses.c2w[valid, 0], args.frames)
+            names = [f"orbit_{i:04d}.png" for i in range(args.frames)]
+        ks = np.repeat(poses.K[None], len(c2w), axis=0)
+    if len(c2w) == 0:
+        raise EigsError(args.sfm, f"no {args.cameras} cameras to render")
+    times = []
+    with torch.no_grad(), atomic_path(args.output, directory=True) as tmp:
+        for i in range(len(c2w)):
+            t0 = time.perf_counter()
+            img, _, _ = model.render(torch.from_numpy(c2w[i]), torch.from_numpy(ks[i]).float(), w, h, bg.to(device))
+            times.append(time.perf_counter() - t0)
+            write_png(tmp / names[i], img.clamp(0, 1).cpu().numpy())
+        fps = len(times) / max(sum(times), 1e-12)
+        report = {"cameras": args.cameras, "frames": len(times), "fps": fps, "mean_ms": 1e3 * float(np.mean(times)),
+                  "n_gaussians": len(model), "width": w, "height": h, "device": str(device)}  # fmt: skip
+        (tmp / "render_report.json").write_text(json.dumps(report, indent=2) + "\n")
+    log.info("rendered %d %s frames to %s: %.1f FPS (%.2f ms per frame, %d Gaussians)", len(times), args.cameras,
+             args.output, fps, report["mean_ms"], len(model))  # fmt: skip
+    return 0

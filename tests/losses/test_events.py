@@ -1,0 +1,68 @@
+"""Event-integration loss (Eq. 9–10) and the intensity model it shares with EDI."""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from eigs.events import edi
+from eigs.losses.events import (
+    LOG_EPS,
+    e2nerf_event_loss,
+    event_integration_loss,
+    lin_log,
+    linear_to_srgb,
+    log_intensity,
+    luma,
+    srgb_to_linear,
+)
+
+
+def test_constants_and_transforms_agree_with_edi():
+    assert LOG_EPS == edi.LOG_EPS
+    rng = np.random.default_rng(0)
+    img = rng.random((4, 5, 3))
+    np.testing.assert_allclose(luma(torch.from_numpy(img)).numpy(), edi.luma(img), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(srgb_to_linear(torch.from_numpy(img)).numpy(), edi.srgb_to_linear(img), atol=1e-15)
+    np.testing.assert_allclose(linear_to_srgb(torch.from_numpy(img)).numpy(), edi.linear_to_srgb(img), atol=1e-15)
+
+
+def test_zero_when_renders_differ_by_exactly_c_times_the_counts():
+    rng = np.random.default_rng(1)
+    counts = torch.from_numpy(rng.integers(-4, 5, (6, 7))).to(torch.int32)
+    c_pos, c_neg = 0.25, 0.2
+    log_a = torch.from_numpy(rng.normal(-1, 0.3, (6, 7)))
+    cd = counts.to(torch.float64)
+    log_b = log_a + torch.where(counts >= 0, c_pos * cd, c_neg * cd)
+    assert event_integration_loss(log_a, log_b, counts, c_pos, c_neg) < 1e-12
+    # per-pixel maps
+    cp = torch.from_numpy(rng.uniform(0.15, 0.3, (6, 7)))
+    cn = torch.from_numpy(rng.uniform(0.15, 0.3, (6, 7)))
+    log_b = log_a + torch.where(counts >= 0, cp * counts, cn * counts)
+    assert event_integration_loss(log_a, log_b, counts, cp, cn) < 1e-12
+    # an error of one event on one unmasked pixel out of 42 → 1/42; masked pixels do not count
+    log_b2 = log_b.clone()
+    log_b2[0, 0] += 100 * max(cp[0, 0], cn[0, 0])
+    mask = torch.zeros(6, 7, dtype=torch.bool)
+    assert event_integration_loss(log_a, log_b2, counts, cp, cn, mask) > 1.0
+    mask[0, 0] = True
+    assert event_integration_loss(log_a, log_b2, counts, cp, cn, mask) < 1e-12
+
+
+def test_log_intensity_model_and_its_gradient_stay_finite_at_zero():
+    img = torch.zeros(3, 4, 3, dtype=torch.float64, requires_grad=True)
+    out = log_intensity(img, "srgb")
+    assert torch.allclose(out, torch.full_like(out, np.log(LOG_EPS)))
+    out.sum().backward()
+    assert torch.isfinite(img.grad).all()
+
+
+def test_lin_log_is_continuous_at_the_knee_and_e2nerf_loss_zero_at_its_target():
+    x = torch.tensor([19.999999, 20.0, 20.000001], dtype=torch.float64)
+    y = lin_log(x)
+    assert (y[2] - y[0]).abs() < 1e-6
+    # renders whose lin-log differences equal 0.3·(E + 0.5) on rising pixels: the positive term vanishes
+    e = torch.tensor([[1, 2]], dtype=torch.int32)
+    cum = torch.stack([torch.zeros_like(e), e])  # (2, 1, 2)
+    logs = torch.stack([torch.zeros(1, 2, dtype=torch.float64), 0.3 * (e.double() + 0.5)])
+    assert e2nerf_event_loss(logs, cum) < 1e-20
