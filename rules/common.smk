@@ -101,9 +101,6 @@ def edi_options(wildcards):
 
 # --- train (rules/train.smk) ----------------------------------------------------------------------------------
 RUNS = config.get("runs", {})
-# GPUs a training job asks for: the workflow profile caps `gpu` at 0 on CPU machines, so the default here is 0;
-# a GPU profile (or `--set-resources train:gpu=1`) raises it and the job's device follows what it was given.
-TRAIN_GPUS = int(config.get("train_gpus", 0))
 
 
 def run_bins(run):

@@ -1,5 +1,7 @@
 # Training: one run folder per (scene, B, run name); a run name stands for a method and its resolved options
-# (config `runs:`), so a run shared by several tables is trained once.
+# (config `runs:`), so a run shared by several tables is trained once. A job asks for one GPU; Snakemake caps it at
+# the available amount (the default profile's `gpu: 0` on CPU machines), and `eigs train --device auto` follows
+# what the job got (CUDA when a GPU is visible, else the CPU).
 
 
 rule train:
@@ -26,7 +28,7 @@ rule train:
     threads: threads_for("train")
     resources:
         mem_mb=4000,
-        gpu=TRAIN_GPUS,
+        gpu=1,
     conda:
         "../workflow/envs/eigs.yaml"
     shell:
