@@ -32,6 +32,7 @@ from eigs.train.config import TrainConfig
 from eigs.train.data import TrainData
 from eigs.train.methods import Method, StepOutput, register
 from eigs.train.model import GaussianModel
+from eigs.train.rigid import transform_gaussians
 
 # Options every multi-render method takes; each method overrides the defaults of its recipe in RECIPE.
 COMMON_OPTIONS: dict[str, Any] = {
@@ -51,6 +52,8 @@ COMMON_OPTIONS: dict[str, Any] = {
     "pose_freqs": 4,
     "lr_ade": 1e-3,
     "pose_prior": False,  # beyond the paper: ADE predicts the residual to the displacement the latent poses imply
+    "subframes": 1,  # beyond the paper: renders per latent interval (> 1 adds interpolated displacements)
+    "blur_weights": "uniform",  # "uniform" (Eq. 2) or "trapezoid" (the exposure integral by the trapezoid rule)
 }
 
 
@@ -79,8 +82,10 @@ class MultiRender(Method):
         o = self.options
         if o["event_loss"] not in ("eigs", "e2nerf", "none"):
             raise EigsError(f"method {self.name}", f"event_loss must be eigs, e2nerf or none, got {o['event_loss']!r}")
-        if (o["consistency"] or o["shape"] or o["pose_prior"]) and not o["ade"]:
-            raise EigsError(f"method {self.name}", "consistency, shape and pose_prior need the ADE (ade: true)")
+        if (o["consistency"] or o["shape"] or o["pose_prior"] or int(o["subframes"]) != 1) and not o["ade"]:
+            raise EigsError(f"method {self.name}", "consistency, shape, pose_prior, subframes need the ADE (ade: true)")
+        if int(o["subframes"]) < 1 or o["blur_weights"] not in ("uniform", "trapezoid"):
+            raise EigsError(f"method {self.name}", "subframes must be >= 1 and blur_weights uniform or trapezoid")
         self.views = data.reference_views()
         if self.views.size == 0:
             raise EigsError(data.scene.name, f"method {self.name}: no view has a valid reference pose")
@@ -142,8 +147,11 @@ class MultiRender(Method):
         c = float(self.threshold[v])
         return c, c
 
-    def renders(self, model: GaussianModel, v: int, sh_degree: int) -> tuple[list[Tensor], list[dict], Tensor | None]:
-        """The L = N+1 renders of view v, their infos, and the raw ADE displacements (N_G, N, 3) or None."""
+    def renders(
+        self, model: GaussianModel, v: int, sh_degree: int
+    ) -> tuple[list[Tensor], list[dict], Tensor | None, list[int]]:
+        """Renders of view v in time order, their infos, the raw ADE displacements (N_G, N, 3) or None, and the
+        positions of the N+1 latent renders in the list (every render is one with ``subframes = 1``)."""
         d, o = self.data, self.options
         images, infos = [], []
 
@@ -156,31 +164,70 @@ class MultiRender(Method):
         if self.ade is None:
             for k in range(self.n_latent):
                 render(self.c2w[v, k])
-            return images, infos, None
+            return images, infos, None, list(range(self.n_latent))
         p = model.params
         x = p["means"].detach()
         out = self.ade(x, self.pose_inputs[v])  # (N_G, N, 3 or 10)
         dx = out[..., :3]
         lam = float(o["lambda_p"])
-        render(self.c2w[v, 0])
+        # offsets at the latent times k = 0..N (k = 0: the Gaussians as they are)
+        disp = [torch.zeros_like(x)]
+        prior_quats: list[Tensor | None] = [None] * self.n_latent
         for k in range(1, self.n_latent):
-            means = p["means"] + lam * dx[:, k - 1]
-            if o["pose_prior"]:
-                rel = self.relative[v, k - 1]
-                means = means + (x @ rel[:3, :3].T + rel[:3, 3] - x)
-            moved = {"means": means}
-            if o["shape"]:
-                moved["quats"] = p["quats"] + lam * out[:, k - 1, 3:7]
-                moved["log_scales"] = p["log_scales"] + lam * out[:, k - 1, 7:10]
-            render(self.c2w[v, 0], **moved)
-        return images, infos, dx
+            dk = lam * dx[:, k - 1]
+            if o["pose_prior"]:  # the Gaussians moved by P_0·P_k⁻¹ (centres and rotations) render what P_k sees
+                moved_x, prior_quats[k] = transform_gaussians(x, p["quats"], self.relative[v, k - 1])
+                dk = dk + (moved_x - x)
+            disp.append(dk)
+        shape = [None] + [lam * out[:, k - 1, 3:] for k in range(1, self.n_latent)] if o["shape"] else None
+        sub = int(o["subframes"])
+        latent_pos = []
+        for k in range(self.n_latent):
+            for j in range(sub if k > 0 else 1):
+                f = 1.0 - j / sub  # fraction of the way from latent k−1 to latent k (1 = at k)
+                if j == 0:
+                    latent_pos.append(len(images))
+                off = disp[k] if f == 1.0 else f * disp[k] + (1 - f) * disp[k - 1]
+                moved = {"means": p["means"] + off} if k > 0 else {}
+                if k > 0 and o["pose_prior"]:  # rotations follow the prior of the nearest latent time
+                    q = prior_quats[k if f >= 0.5 else k - 1]
+                    moved["quats"] = p["quats"] if q is None else q
+                if shape is not None and k > 0:
+                    prev = shape[k - 1] if shape[k - 1] is not None else torch.zeros_like(shape[k])
+                    sk = shape[k] if f == 1.0 else f * shape[k] + (1 - f) * prev
+                    moved["quats"] = moved.get("quats", p["quats"]) + sk[:, :4]
+                    moved["log_scales"] = p["log_scales"] + sk[:, 4:7]
+                render(self.c2w[v, 0], **moved)
+        # time order: within each interval the renders were made from latent k backwards; sort by time
+        order = sorted(range(len(images)), key=lambda i: self._render_time(i, sub))
+        images, infos = [images[i] for i in order], [infos[i] for i in order]
+        latent_pos = [order.index(i) for i in latent_pos]
+        return images, infos, dx, latent_pos
+
+    @staticmethod
+    def _render_time(i: int, sub: int) -> float:
+        """Time (in latent intervals) of the i-th render of :meth:`renders`' construction order."""
+        if i == 0:
+            return 0.0
+        k, j = divmod(i - 1, sub)
+        return k + 1 - j / sub
+
+    def blur_weights(self, n: int) -> Tensor:
+        """Weights of the n time-ordered renders in the blur average: uniform (Eq. 2) or trapezoidal."""
+        if self.options["blur_weights"] == "uniform" or n == 1:
+            return torch.full((n,), 1.0 / n)
+        w = torch.ones(n)
+        w[0] = w[-1] = 0.5
+        return w / w.sum()
 
     def step(self, model: GaussianModel, sample: int, step: int, sh_degree: int) -> StepOutput:
         o = self.options
         v = int(self.views[sample])
-        images, infos, dx = self.renders(model, v, sh_degree)
-        stack = torch.stack(images)  # (L, H, W, C)
-        blur = from_linear(to_linear(stack, self.response).mean(dim=0), self.response)
+        images, infos, dx, latent_pos = self.renders(model, v, sh_degree)
+        stack = torch.stack(images)  # (R, H, W, C) in time order
+        w = self.blur_weights(len(images)).to(stack.dtype).reshape(-1, 1, 1, 1)
+        blur = from_linear((to_linear(stack, self.response) * w).sum(dim=0), self.response)
+        stack = stack[latent_pos]  # the N+1 latent renders for the event losses
         loss, l1, dssim = photometric_loss(blur, self.blurry[v], self.cfg.lambda_dssim)
         terms = {"l1": l1.item(), "dssim": dssim.item()}
         if o["event_loss"] == "eigs":

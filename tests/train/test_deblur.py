@@ -1,0 +1,133 @@
+"""The multi-render methods (EiGS family, Deblurring-GS(+), E2GS): camera-delta identity, ADE gradients from each
+loss, which parameters the ADE moves, and option checks."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from eigs.errors import EigsError
+from eigs.losses import photometric_loss
+from eigs.losses.consistency import motion_consistency_loss
+from eigs.losses.events import event_integration_loss, log_intensity
+from eigs.render.gaussians import render_gaussians
+from eigs.train.config import TrainConfig
+from eigs.train.data import load_train_data
+from eigs.train.loop import Trainer
+from eigs.train.rigid import quat_multiply, rotmat_to_quat, transform_gaussians
+from eigs.train.strategy import quat_to_rotmat
+
+
+@pytest.fixture(scope="module")
+def data(toy):
+    return load_train_data(*toy.paths())
+
+
+def _random_rigid(g: torch.Generator) -> torch.Tensor:
+    q = torch.cat([torch.ones(1, dtype=torch.float64), 0.1 * torch.randn(3, generator=g, dtype=torch.float64)])
+    t = torch.eye(4, dtype=torch.float64)
+    t[:3, :3] = quat_to_rotmat(q[None])[0]
+    t[:3, 3] = torch.randn(3, generator=g, dtype=torch.float64) * 0.1
+    return t
+
+
+def test_moving_the_gaussians_by_the_inverse_equals_moving_the_camera():
+    g = torch.Generator().manual_seed(0)
+    n = 60
+    means = (torch.randn(n, 3, generator=g) * 0.4 + torch.tensor([0.0, 0.0, 3.0])).double()
+    quats = torch.randn(n, 4, generator=g).double()
+    log_scales = (torch.randn(n, 3, generator=g) * 0.5 - 2.5).double()  # anisotropic
+    opac = torch.randn(n, generator=g).double()
+    sh = torch.rand(n, 1, 3, generator=g).double()
+    K = torch.tensor([[50.0, 0, 24], [0, 50.0, 18], [0, 0, 1]], dtype=torch.float64)
+    p0 = torch.eye(4, dtype=torch.float64)
+    pk = p0 @ _random_rigid(g)
+    direct, _, _ = render_gaussians(means, quats, log_scales, opac, sh, pk, K, 48, 36)
+    rel = p0 @ torch.linalg.inv(pk)  # P_0 · P_k⁻¹
+    m2, q2 = transform_gaussians(means, quats, rel)
+    moved, _, _ = render_gaussians(m2, q2, log_scales, opac, sh, p0, K, 48, 36)
+    assert direct.abs().max() > 0.1
+    torch.testing.assert_close(moved, direct, atol=1e-9, rtol=0)
+
+
+def test_quaternion_helpers():
+    g = torch.Generator().manual_seed(1)
+    q = torch.randn(100, 4, generator=g, dtype=torch.float64)
+    q = q / q.norm(dim=1, keepdim=True)
+    q = torch.where(q[:, :1] < 0, -q, q)
+    torch.testing.assert_close(rotmat_to_quat(quat_to_rotmat(q)), q)
+    a, b = q[:50], q[50:]
+    torch.testing.assert_close(quat_to_rotmat(quat_multiply(a, b)), quat_to_rotmat(a) @ quat_to_rotmat(b))
+
+
+def _method(data, name, **options):
+    cfg = TrainConfig.from_dict({"method": name, "densify": False, "method_options": options})
+    return Trainer(data, cfg, torch.device("cpu"))
+
+
+def test_ade_receives_gradients_from_each_loss(data):
+    tr = _method(data, "eigs")
+    m, model = tr.method, tr.model
+    images, _, dx, latent = m.renders(model, int(m.views[0]), 0)
+    stack = torch.stack(images)
+    blur, _, _ = photometric_loss(stack.mean(0), m.blurry[int(m.views[0])])
+    logs = log_intensity(stack[latent], m.response, m.edi_mode)
+    c = m.counts[int(m.views[0])]
+    cp, cn = m.thresholds(int(m.views[0]))
+    event = event_integration_loss(logs[0], logs[1], c[1] - c[0], cp, cn, m.event_mask)
+    consis = motion_consistency_loss(model.params["means"].detach(), dx[:, 0])
+    for name, loss in (("blur", blur), ("event", event), ("consistency", consis)):
+        m.ade.zero_grad()
+        loss.backward(retain_graph=True)
+        grad = m.ade.first_x.weight.grad
+        assert grad is not None and torch.isfinite(grad).all() and grad.abs().sum() > 0, name
+
+
+@pytest.mark.parametrize(("name", "moves_shape"), [("deblurring-gs", False), ("deblurring-gs+", True)])
+def test_which_parameters_the_ade_moves(data, name, moves_shape, monkeypatch):
+    tr = _method(data, name)
+    seen = []
+    orig = tr.model.render
+
+    def spy(*args, **kw):
+        seen.append(sorted(k for k in ("means", "quats", "log_scales") if kw.get(k) is not None))
+        return orig(*args, **kw)
+
+    monkeypatch.setattr(tr.model, "render", spy)
+    out = tr.method.step(tr.model, 0, 0, 0)
+    assert torch.isfinite(out.loss)
+    assert seen[0] == [] and len(seen) == data.n_latent
+    want = ["log_scales", "means", "quats"] if moves_shape else ["means"]
+    assert all(s == want for s in seen[1:])
+    assert tr.method.ade.last.out_features == (data.n_latent - 1) * (10 if moves_shape else 3)
+
+
+def test_subframes_interpolate_and_trapezoid_weights(data):
+    tr = _method(data, "eigs", subframes=3, blur_weights="trapezoid", pose_prior=True)
+    images, infos, dx, latent = tr.method.renders(tr.model, 0, 0)
+    n = data.n_latent
+    assert len(images) == 1 + 3 * (n - 1) and latent == [0, 3, 6, 9, 12][:n]
+    w = tr.method.blur_weights(len(images))
+    assert math.isclose(float(w.sum()), 1.0, abs_tol=1e-6) and w[0] == w[-1] == w[1] / 2
+    assert torch.isfinite(tr.method.step(tr.model, 0, 0, 0).loss)
+
+
+def test_e2gs_renders_the_latent_poses(data):
+    tr = _method(data, "e2gs")
+    images, _, dx, latent = tr.method.renders(tr.model, 0, 0)
+    assert dx is None and tr.method.ade is None and latent == list(range(data.n_latent))
+    direct, _, _ = tr.model.render(data.c2w[0, 2], tr.method.K, data.width, data.height, tr.method.background, 0)
+    torch.testing.assert_close(images[2], direct)
+
+
+def test_option_errors(data):
+    with pytest.raises(EigsError, match="need the ADE"):
+        _method(data, "e2gs", consistency=True)
+    with pytest.raises(EigsError, match="event_loss"):
+        _method(data, "eigs", event_loss="mse")
+    with pytest.raises(EigsError, match="unknown option"):
+        _method(data, "eigs", widht=3)
+    assert np.isfinite(_method(data, "eigs-minus").method.step(_method(data, "eigs-minus").model, 0, 0, 0).loss.item())
