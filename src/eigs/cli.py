@@ -17,7 +17,9 @@ from collections.abc import Sequence
 from eigs import __version__
 from eigs.errors import EigsError
 
-# subcommand name -> module path (in pipeline order)
+# subcommand name -> module path (in pipeline order). A subcommand is named for what it does and lives in the
+# package of its stage: ingest -> io (readers of outside formats), edi -> events, init -> sfm (it reads the SfM
+# model), resources -> metrics (the model files the metrics need), render -> train (it renders a run folder).
 COMMANDS: dict[str, str] = {
     "scene": "eigs.scene.cli",
     "synth": "eigs.synth.cli",
