@@ -29,6 +29,7 @@ COMMANDS: dict[str, str] = {
     "init": "eigs.sfm.init_cli",
     "train": "eigs.train.cli",
     "render": "eigs.train.render_cli",
+    "evaluate": "eigs.evaluate.cli",
     "metric": "eigs.metrics.cli",
     "resources": "eigs.metrics.resources_cli",
 }

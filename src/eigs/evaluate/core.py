@@ -1,0 +1,233 @@
+"""Evaluate one run folder: render, quantise to 8 bits, save the PNGs, score them.
+
+Synthetic scenes (ground-truth sharp images and ``sfm/test_cameras.h5``): every test camera is rendered, and PSNR,
+SSIM in every lineage (:data:`eigs.metrics.pixel.SSIM_MODES`) and LPIPS-alex are computed against the ground truth,
+separately for blur views (kind 0: a training view's ground truth at its first latent time, the reference pose) and
+novel views (kind 1). Cameras come only from ``test_cameras.h5`` (docs/sfm.md, "Test cameras").
+
+Scenes without ground truth: BRISQUE of renders at the training views' reference poses (latent k = 0 of
+``poses.h5``) and on an orbit (:func:`eigs.util.cameras.orbit_cameras`), as E²NeRF's real protocol (blur views plus a
+render path). An image whose BRISQUE is undefined (e.g. constant: an orbit frame that misses the scene) is counted
+in ``brisque_undefined`` and left out of the mean, never scored silently.
+
+Every run also reports training seconds and steps (``config.json``), the number of Gaussians and the test-time
+frames per second (render only, after a warm-up render).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import logging
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from eigs.errors import EigsError
+
+log = logging.getLogger("eigs.evaluate")
+
+SSIM_TABLE_MODE = "3dgs"  # the lineage the tables show (docs/metrics.md)
+LPIPS_NET = "alex"
+KIND_NAMES = {0: "blur", 1: "novel"}
+DEFAULT_ORBIT_FRAMES = 120  # E²NeRF's real protocol: 120 path renders beside the blur views
+
+
+def read_run_config(run_dir: Path) -> dict[str, Any]:
+    """``config.json`` of a finished run (``train``, ``inputs``, ``run`` sections)."""
+    path = run_dir / "config.json"
+    if not path.is_file():
+        raise EigsError(run_dir, "no config.json (not a finished run folder; run `eigs train` first)")
+    try:
+        doc = json.loads(path.read_text())
+        int(doc["train"]["sh_degree"])
+        float(doc["run"]["train_seconds"])
+    except (ValueError, KeyError, TypeError) as err:
+        raise EigsError(path, f"unreadable run config ({err})") from None
+    return doc
+
+
+def finite_or_none(v: float) -> float | None:
+    """JSON-safe number: non-finite values become null (the caller logs why)."""
+    return float(v) if math.isfinite(v) else None
+
+
+def _mean(values: list[float]) -> float:
+    return float(np.mean(values)) if values else math.nan
+
+
+def score_pair(img: np.ndarray, ref: np.ndarray, resources: str | None) -> dict[str, float]:
+    """PSNR, SSIM in every lineage and LPIPS-alex of one uint8 render against its uint8 ground truth."""
+    from eigs.metrics.perceptual import lpips
+    from eigs.metrics.pixel import SSIM_MODES, psnr, ssim
+
+    out = {"psnr": psnr(img, ref)}
+    for mode in SSIM_MODES:
+        out[f"ssim_{mode}"] = ssim(img, ref, mode)
+    out[f"lpips_{LPIPS_NET}"] = lpips(img, ref, LPIPS_NET, resources)
+    return out
+
+
+def evaluate_run(
+    run_dir: str | Path,
+    scene_path: str | Path,
+    sfm_dir: str | Path,
+    output: str | Path,
+    *,
+    resources: str | None = None,
+    orbit_frames: int = DEFAULT_ORBIT_FRAMES,
+    device: str = "auto",
+) -> dict[str, Any]:
+    """Evaluate ``run_dir``; write ``output`` (metrics.json), ``per_image.csv`` and ``renders/`` beside it.
+
+    Returns the metrics document (also written). Layout of ``renders/``: synthetic scenes ``blur/``, ``novel/``
+    (renders) and ``gt_blur/``, ``gt_novel/`` (ground truth), files ``{row:04d}.png`` with the row of the image in
+    the scene's ``gt/sharp``; other scenes ``train/{view:04d}.png`` and ``orbit/{i:04d}.png``.
+    """
+    import torch
+
+    from eigs.artifacts.gaussians import read_gaussian_ply
+    from eigs.artifacts.poses import METHODS, read_poses, read_test_cameras
+    from eigs.evaluate.renderer import cloud_tensors, render_uint8
+    from eigs.scene import read_scene
+    from eigs.util.atomic import atomic_path
+    from eigs.util.cameras import orbit_cameras
+    from eigs.util.image import write_png
+
+    run_dir, sfm_dir, output = Path(run_dir), Path(sfm_dir), Path(output)
+    doc = read_run_config(run_dir)
+    train, facts = doc["train"], doc["run"]
+    scene = read_scene(scene_path, events=False)
+    cloud = read_gaussian_ply(run_dir / "model.ply")
+    if len(cloud) == 0:
+        raise EigsError(run_dir / "model.ply", "the model has no Gaussians")
+    cloud.validate(run_dir / "model.ply")
+    dev = torch.device("cuda" if device == "cuda" or (device == "auto" and torch.cuda.is_available()) else "cpu")
+    g = cloud_tensors(cloud, int(train["sh_degree"]), int(scene.channels), dev)
+    bg = scene.background if scene.background is not None else np.zeros(scene.channels)
+    poses = read_poses(sfm_dir)
+    w, h = poses.width, poses.height
+    if (w, h) != (scene.camera.width, scene.camera.height):
+        raise EigsError(sfm_dir, f"poses are {w}x{h}, the scene {scene.camera.width}x{scene.camera.height}")
+    tc_path = sfm_dir / "test_cameras.h5"
+    tc = read_test_cameras(tc_path) if (scene.sharp is not None and tc_path.exists()) else None
+    has_gt = tc is not None and len(tc) > 0
+
+    rows: list[dict[str, Any]] = []
+    groups: dict[str, dict[str, Any]] = {}
+    times: list[float] = []
+    renders_dir = output.parent / "renders"
+    with atomic_path(renders_dir, directory=True) as tmp:
+        if has_gt:
+            assert tc is not None and scene.sharp is not None
+            images, times = render_uint8(g, tc.c2w, tc.K, w, h, bg)
+            for kind, name in KIND_NAMES.items():
+                sel = np.nonzero(tc.kind == kind)[0]
+                per: list[dict[str, float]] = []
+                for i in sel:
+                    row = int(tc.index[i])
+                    ref = np.asarray(scene.sharp.images[row])
+                    write_png(tmp / name / f"{row:04d}.png", images[i])
+                    write_png(tmp / f"gt_{name}" / f"{row:04d}.png", ref)
+                    s = score_pair(images[i], ref, resources)
+                    per.append(s)
+                    rows.append({"set": name, "image": f"{row:04d}.png", "view": int(tc.view[i]),
+                                 "camera": METHODS.get(int(tc.method[i]), "?"), **s})  # fmt: skip
+                if per:
+                    groups[name] = {"n": len(per), **{k: _mean([p[k] for p in per]) for k in per[0]}}
+        else:
+            from eigs.metrics.noreference import brisque
+
+            valid = poses.valid[:, 0]
+            if not valid.any():
+                raise EigsError(sfm_dir, "no training view has a valid reference pose (latent k = 0)")
+            views = np.nonzero(valid)[0]
+            orbit = orbit_cameras(poses.c2w[valid, 0], orbit_frames)
+            sets = {
+                "train": (poses.c2w[valid, 0], [f"{v:04d}.png" for v in views]),
+                "orbit": (orbit, [f"{i:04d}.png" for i in range(orbit_frames)]),
+            }
+            for name, (c2w, names) in sets.items():
+                if len(c2w) == 0:
+                    continue
+                ks = np.repeat(np.asarray(poses.K)[None], len(c2w), axis=0)
+                images, t = render_uint8(g, c2w, ks, w, h, bg)
+                times += t
+                scores, undefined = [], 0
+                for img, fname in zip(images, names, strict=True):
+                    write_png(tmp / name / fname, img)
+                    try:
+                        b = brisque(img, resources)
+                    except EigsError as err:
+                        if "model" in str(err).lower() or "resources" in str(err).lower():
+                            raise
+                        undefined += 1
+                        log.warning("%s/%s: BRISQUE undefined (%s); left out of the mean", name, fname, err)
+                        b = math.nan
+                    else:
+                        scores.append(b)
+                    rows.append({"set": name, "image": fname, "brisque": b})
+                groups[name] = {"n": len(images), "brisque": _mean(scores), "brisque_undefined": undefined}
+            all_scores = [r["brisque"] for r in rows if math.isfinite(r["brisque"])]
+            groups["all"] = {"n": len(rows), "brisque": _mean(all_scores),
+                             "brisque_undefined": len(rows) - len(all_scores)}  # fmt: skip
+            if not all_scores:
+                log.warning("BRISQUE is undefined for every render of %s", run_dir)
+
+    fps = len(times) / sum(times) if times and sum(times) > 0 else math.nan
+    metrics: dict[str, Any] = {}
+    for name, grp in groups.items():
+        clean = {}
+        for k, v in grp.items():
+            if isinstance(v, float) and not math.isfinite(v):
+                log.warning("%s %s is %s; written as null", name, k, v)
+            clean[k] = finite_or_none(v) if isinstance(v, float) else v
+        metrics[name] = clean
+    result = {
+        "format": "eigs-metrics",
+        "version": 1,
+        "run_dir": str(run_dir),
+        "run": run_dir.name,
+        "method": train.get("method"),
+        "method_options": facts.get("method_options", {}),
+        "scene": scene.name,
+        "bins": int(poses.n_latent - 1),
+        "ground_truth": bool(has_gt),
+        "ssim_table_mode": SSIM_TABLE_MODE,
+        "lpips_net": LPIPS_NET,
+        "metrics": metrics,
+        "train_seconds": float(facts["train_seconds"]),
+        "steps": int(train.get("steps", 0)),
+        "n_gaussians": len(cloud),
+        "fps": finite_or_none(fps),
+        "render_ms": finite_or_none(1e3 * float(np.mean(times))) if times else None,
+        "frames_timed": len(times),
+        "device": str(dev),
+        "width": int(w),
+        "height": int(h),
+        "test_cameras": (
+            {v: int(np.sum(tc.method == k)) for k, v in METHODS.items()} if has_gt and tc is not None else None
+        ),
+        "orbit_frames": None if has_gt else int(orbit_frames),
+    }
+    with atomic_path(output.parent / "per_image.csv") as tmp:
+        tmp.write_text(per_image_csv(rows))
+    with atomic_path(output) as tmp:
+        tmp.write_text(json.dumps(result, indent=2, allow_nan=False) + "\n")
+    return result
+
+
+def per_image_csv(rows: list[dict[str, Any]]) -> str:
+    """One CSV row per scored image (empty cells for NaN)."""
+    cols: list[str] = []
+    for r in rows:
+        cols += [k for k in r if k not in cols]
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=cols, lineterminator="\n")
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: ("" if isinstance(v, float) and not math.isfinite(v) else v) for k, v in r.items()})
+    return buf.getvalue()
