@@ -107,66 +107,137 @@ def _estimate_threshold(evidence: list[thr.ViewEvidence]) -> float:
     return c
 
 
+@dataclass
+class _ViewEvents:
+    """Per-view event data of one scene (V views, B bins, H × W pixels)."""
+
+    cum: np.ndarray  # (V, B + 1, H, W) int32 signed event counts from the first latent time to each latent time
+    event_count: np.ndarray  # (V,) int64 events in each view's exposure
+    slices: np.ndarray | None  # (V, 2) int64 [start, stop) of each view's events in scene.events (raw events)
+    integrals: list[ExposureIntegral | None]  # exact exposure integrals (estimated mode, views with events)
+    evals: list[tuple[np.ndarray, np.ndarray] | None]  # (eval_counts, rate) for the threshold energy
+
+
 def compute_edi(scene: Scene, opts: EdiOptions, path: str = "") -> EdiResult:
-    """Run EDI on every view of ``scene``. ``path`` names the scene file in error messages."""
+    """Run EDI on every view of ``scene``. ``path`` names the scene file in error messages.
+
+    Phases: check the options → bins and latent times → hot-pixel mask → per-view events → sharp views →
+    threshold → per-pixel thresholds → latent frames.
+    """
     path = path or scene.name
     scene.require("frames", path=path)
     assert scene.frames is not None
+    mode = _check_options(scene, opts)
+    raw = scene.events is not None and len(scene.events) > 0
+    prebinned = scene.binned is not None and not raw
+    bins, times = _bins_and_times(path, scene, opts, raw, prebinned)
+    if not raw and not prebinned:
+        log.warning("the scene has no events: every view is passed through as sharp")
+    hot = _hot_pixel_mask(scene, opts, mode, raw, prebinned)
+    ve = _view_events(path, scene, opts, mode, bins, times, hot, raw, prebinned)
+    h, w = scene.frames.blurry.shape[1:3]
+    sharp, active = _sharp_views(ve.event_count, h, w)
+    lin = _linear_frames(scene, mode, active)
+    thresholds, scope = _thresholds(scene, opts, mode, ve, lin, active)
+    maps = None
+    if mode == "estimated" and opts.per_pixel_threshold:
+        maps = _per_pixel_thresholds(scene, opts, thresholds, ve.slices, hot, active)
+    latent, extent = _latent_frames(scene, opts, mode, times, ve, lin, thresholds, sharp, maps, hot)
+    c_pos_map, c_neg_map, _ = maps if maps is not None else (None, None, {})
+    return EdiResult(
+        latent=latent,
+        timestamps_us=times.astype(np.int64),
+        cum_counts=ve.cum,
+        threshold=thresholds.astype(np.float64),
+        sharp=sharp,
+        event_count=ve.event_count,
+        events_per_pixel=ve.event_count.astype(np.float64) / float(h * w),
+        blur_extent_px=extent,
+        mode=mode,
+        threshold_scope=scope,
+        scene_name=scene.name,
+        event_mask=hot,
+        threshold_pos_map=c_pos_map,
+        threshold_neg_map=c_neg_map,
+    )
+
+
+def _check_options(scene: Scene, opts: EdiOptions) -> str:
+    """The resolved mode; raises :class:`EigsError` for an unknown scope or an implausible threshold."""
     mode = resolve_mode(scene, opts.mode)
     if opts.threshold_scope not in SCOPES:
         raise EigsError(None, f"--threshold-scope must be one of {SCOPES}, got {opts.threshold_scope!r}")
     if opts.threshold is not None and not (thr.C_MIN / 100 <= opts.threshold <= 10):
         raise EigsError(None, f"--threshold must be a positive contrast threshold (log units), got {opts.threshold}")
-    blurry = scene.frames.blurry
-    v_n, h, w, ch = blurry.shape
-    raw = scene.events is not None and len(scene.events) > 0
-    prebinned = scene.binned is not None and not raw
+    return mode
 
-    # ---- bins and latent times
+
+def _bins_and_times(
+    path: str, scene: Scene, opts: EdiOptions, raw: bool, prebinned: bool
+) -> tuple[int, np.ndarray]:
+    """B and the (V, B + 1) int64 latent times (µs): the scene's bin edges when pre-binned, else
+    :func:`choose_latent_times` (zeros, or the scene's latent times, when the frames have no exposure times)."""
+    assert scene.frames is not None
     if prebinned:
         assert scene.binned is not None
         bins = binning.check_prebinned(path, scene.binned.n_bins, opts.bins)
-        times = scene.binned.bin_edges_us.astype(np.int64)
+        return bins, scene.binned.bin_edges_us.astype(np.int64)
+    bins = binning.check_bins(opts.bins if opts.bins is not None else DEFAULT_BINS)
+    if raw and (scene.frames.exposure_us is None):
+        raise EigsError(
+            path,
+            "the scene has raw events but no exposure times, so its events cannot be assigned to frames; "
+            "re-ingest with --exposure-us START,END (or an exposure file)",
+        )
+    if scene.frames.exposure_us is not None:
+        return bins, choose_latent_times(path, scene, bins)
+    times = np.zeros((scene.frames.blurry.shape[0], bins + 1), np.int64)
+    if scene.poses is not None and scene.poses.latent_t_us.shape == times.shape:
+        times = scene.poses.latent_t_us.astype(np.int64)
+    return bins, times
+
+
+def _hot_pixel_mask(scene: Scene, opts: EdiOptions, mode: str, raw: bool, prebinned: bool) -> np.ndarray:
+    """(H, W) bool hot-pixel / flicker mask (estimated mode only: the E²NeRF mode reproduces E²NeRF exactly)."""
+    assert scene.frames is not None
+    h, w = scene.frames.blurry.shape[1:3]
+    if mode != "estimated" or opts.mask_top <= 0:
+        return np.zeros((h, w), dtype=bool)
+    if raw:
+        assert scene.events is not None
+        rate = mask_mod.event_rate_map(scene.events.x, scene.events.y, h, w)
+    elif prebinned:
+        assert scene.binned is not None
+        rate = np.abs(scene.binned.counts).sum(axis=(0, 1))
     else:
-        bins = binning.check_bins(opts.bins if opts.bins is not None else DEFAULT_BINS)
-        if raw and (scene.frames.exposure_us is None):
-            raise EigsError(
-                path,
-                "the scene has raw events but no exposure times, so its events cannot be assigned to frames; "
-                "re-ingest with --exposure-us START,END (or an exposure file)",
-            )
-        if scene.frames.exposure_us is not None:
-            times = choose_latent_times(path, scene, bins)
-        else:
-            times = np.zeros((v_n, bins + 1), np.int64)
-            if scene.poses is not None and scene.poses.latent_t_us.shape == times.shape:
-                times = scene.poses.latent_t_us.astype(np.int64)
-    if not raw and not prebinned:
-        log.warning("the scene has no events: every view is passed through as sharp")
+        rate = np.zeros((h, w), np.int64)
+    hot = mask_mod.hot_pixel_mask(rate, opts.mask_top, opts.mask_factor)
+    log.info("hot-pixel/flicker mask: %d pixels (%.3f %%)", int(hot.sum()), 100.0 * hot.mean())
+    return hot
 
-    # ---- hot-pixel / flicker mask (estimated mode only: the E²NeRF mode reproduces E²NeRF exactly)
-    hot = np.zeros((h, w), dtype=bool)
-    if mode == "estimated" and opts.mask_top > 0:
-        if raw:
-            assert scene.events is not None
-            rate = mask_mod.event_rate_map(scene.events.x, scene.events.y, h, w)
-        elif prebinned:
-            assert scene.binned is not None
-            rate = np.abs(scene.binned.counts).sum(axis=(0, 1))
-        else:
-            rate = np.zeros((h, w), np.int64)
-        hot = mask_mod.hot_pixel_mask(rate, opts.mask_top, opts.mask_factor)
-        log.info("hot-pixel/flicker mask: %d pixels (%.3f %%)", int(hot.sum()), 100.0 * hot.mean())
 
-    # ---- per-view events: counts, bins, exact integrals
+def _view_events(
+    path: str,
+    scene: Scene,
+    opts: EdiOptions,
+    mode: str,
+    bins: int,
+    times: np.ndarray,
+    hot: np.ndarray,
+    raw: bool,
+    prebinned: bool,
+) -> _ViewEvents:
+    """Per view: count the events, bin them at the latent times and, in estimated mode, build the exact exposure
+    integral and the threshold-energy maps (views under :data:`SHARP_EVENTS_PER_PIXEL` get neither)."""
+    assert scene.frames is not None
+    v_n, h, w = scene.frames.blurry.shape[:3]
     cum = np.zeros((v_n, bins + 1, h, w), np.int32)
     event_count = np.zeros(v_n, np.int64)
     slices = _view_slices(path, scene) if raw else None
     integrals: list[ExposureIntegral | None] = [None] * v_n
-    evals: list[tuple[np.ndarray, np.ndarray] | None] = [None] * v_n  # (eval_counts, rate) for the energy
-    for v in progress(range(v_n), desc="edi: bin events", total=v_n, unit="view") if opts.show_progress else range(
-        v_n
-    ):
+    evals: list[tuple[np.ndarray, np.ndarray] | None] = [None] * v_n
+    views = range(v_n)
+    for v in progress(views, desc="edi: bin events", total=v_n, unit="view") if opts.show_progress else views:
         if raw:
             assert scene.events is not None and slices is not None and scene.frames.exposure_us is not None
             a, b = int(slices[v, 0]), int(slices[v, 1])
@@ -184,93 +255,114 @@ def compute_edi(scene: Scene, opts: EdiOptions, path: str = "") -> EdiResult:
             event_count[v] = int(np.abs(scene.binned.counts[v]).astype(np.int64).sum())
             cum[v] = binning.cumulative_counts(counts)
             evals[v] = _eval_maps_binned(counts)
-    events_per_pixel = event_count.astype(np.float64) / float(h * w)
-    sharp = events_per_pixel < SHARP_EVENTS_PER_PIXEL
-    active = np.flatnonzero(~sharp)
-    log.info("%d of %d views have events; %d are passed through as sharp", active.size, v_n, int(sharp.sum()))
+    return _ViewEvents(cum, event_count, slices, integrals, evals)
 
-    # ---- threshold
+
+def _sharp_views(event_count: np.ndarray, h: int, w: int) -> tuple[np.ndarray, np.ndarray]:
+    """((V,) bool views passed through as sharp (under :data:`SHARP_EVENTS_PER_PIXEL`), indices of the others)."""
+    sharp = event_count.astype(np.float64) / float(h * w) < SHARP_EVENTS_PER_PIXEL
+    active = np.flatnonzero(~sharp)
+    log.info("%d of %d views have events; %d are passed through as sharp", active.size, sharp.size, int(sharp.sum()))
+    return sharp, active
+
+
+def _linear_frames(scene: Scene, mode: str, active: np.ndarray) -> list[np.ndarray | None]:
+    """Per view: the blurry frame as (H, W, C) float64 linear intensity (estimated mode, views with events)."""
+    assert scene.frames is not None
+    lin: list[np.ndarray | None] = [None] * scene.frames.blurry.shape[0]
+    if mode != "e2nerf":
+        for v in active:
+            lin[v] = to_linear(scene.frames.blurry[v], scene.camera_response)
+    return lin
+
+
+def _thresholds(
+    scene: Scene,
+    opts: EdiOptions,
+    mode: str,
+    ve: _ViewEvents,
+    lin: list[np.ndarray | None],
+    active: np.ndarray,
+) -> tuple[np.ndarray, str]:
+    """((V,) contrast thresholds, scope): given, E²NeRF's, or estimated per scene (at most :data:`SEARCH_VIEWS`
+    evenly spaced views) or per view."""
+    v_n = ve.event_count.shape[0]
     thresholds = np.full(v_n, np.nan)
-    lin = [None] * v_n
     if mode == "e2nerf":
         thresholds[:] = E2NERF_C if opts.threshold is None else opts.threshold
-        scope = "given"
-    else:
-        for v in active:
-            lin[v] = to_linear(blurry[v], scene.camera_response)
-        evidence = {
-            int(v): thr.ViewEvidence(lin[v], integrals[v], cum[v], *evals[v]) for v in active if evals[v] is not None
-        }
-        if opts.threshold is not None:
-            thresholds[:] = opts.threshold
-            scope = "given"
-        elif not evidence:
-            thresholds[:] = scene.contrast_threshold or FALLBACK_C
-            scope = opts.threshold_scope
-            log.warning("no view has events: threshold set to %.3f without estimation", thresholds[0])
-        elif opts.threshold_scope == "scene":
-            keys = sorted(evidence)
-            idx = np.unique(np.linspace(0, len(keys) - 1, min(SEARCH_VIEWS, len(keys))).round().astype(int))
-            pick = [keys[i] for i in idx]
-            c = _estimate_threshold([evidence[k] for k in pick])
-            log.info("estimated contrast threshold (scene, %d views): c = %.4f", len(pick), c)
-            thresholds[:] = c
-            scope = "scene"
-        else:
-            it = progress(sorted(evidence), desc="edi: threshold", unit="view") if opts.show_progress else evidence
-            for v in it:
-                thresholds[v] = _estimate_threshold([evidence[v]])
-            fill = float(np.median(thresholds[sorted(evidence)]))
-            thresholds[np.isnan(thresholds)] = fill
-            scope = "view"
-            log.info("estimated thresholds per view: median %.4f, range %.4f–%.4f", fill, *np.nanpercentile(
-                thresholds, [0, 100]))
+        return thresholds, "given"
+    evidence = {
+        int(v): thr.ViewEvidence(lin[v], ve.integrals[v], ve.cum[v], *ve.evals[v])
+        for v in active
+        if ve.evals[v] is not None
+    }
+    if opts.threshold is not None:
+        thresholds[:] = opts.threshold
+        return thresholds, "given"
+    if not evidence:
+        thresholds[:] = scene.contrast_threshold or FALLBACK_C
+        log.warning("no view has events: threshold set to %.3f without estimation", thresholds[0])
+        return thresholds, opts.threshold_scope
+    if opts.threshold_scope == "scene":
+        keys = sorted(evidence)
+        idx = np.unique(np.linspace(0, len(keys) - 1, min(SEARCH_VIEWS, len(keys))).round().astype(int))
+        pick = [keys[i] for i in idx]
+        c = _estimate_threshold([evidence[k] for k in pick])
+        log.info("estimated contrast threshold (scene, %d views): c = %.4f", len(pick), c)
+        thresholds[:] = c
+        return thresholds, "scene"
+    it = progress(sorted(evidence), desc="edi: threshold", unit="view") if opts.show_progress else evidence
+    for v in it:
+        thresholds[v] = _estimate_threshold([evidence[v]])
+    fill = float(np.median(thresholds[sorted(evidence)]))
+    thresholds[np.isnan(thresholds)] = fill
+    log.info("estimated thresholds per view: median %.4f, range %.4f–%.4f", fill, *np.nanpercentile(
+        thresholds, [0, 100]))
+    return thresholds, "view"
 
-    # ---- per-pixel thresholds (estimated mode, raw events continuous across the gaps)
-    maps = None
-    if mode == "estimated" and opts.per_pixel_threshold:
-        maps = _per_pixel_thresholds(scene, opts, thresholds, slices, hot, active)
+
+def _latent_frames(
+    scene: Scene,
+    opts: EdiOptions,
+    mode: str,
+    times: np.ndarray,
+    ve: _ViewEvents,
+    lin: list[np.ndarray | None],
+    thresholds: np.ndarray,
+    sharp: np.ndarray,
+    maps: tuple[np.ndarray, np.ndarray, dict[int, cal.PolarityIntegral]] | None,
+    hot: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """((V, B + 1, H, W, C) float32 latent frames in the scene's pixel domain [0, 1], (V,) blur extent in px).
+    Sharp views are copied; E²NeRF mode runs its exact model; estimated mode uses the per-pixel maps when there
+    are any, else the exact exposure integral, else the discrete model."""
+    assert scene.frames is not None
+    blurry = scene.frames.blurry
+    v_n, h, w, ch = blurry.shape
     c_pos_map, c_neg_map, pol_ints = maps if maps is not None else (None, None, {})
-
-    # ---- latent frames
-    latent = np.empty((v_n, bins + 1, h, w, ch), np.float32)
+    latent = np.empty((v_n, ve.cum.shape[1], h, w, ch), np.float32)
     extent = np.zeros(v_n, np.float64)
-    it2 = progress(range(v_n), desc="edi: latent frames", total=v_n, unit="view") if opts.show_progress else range(
-        v_n
-    )
-    for v in it2:
+    views = range(v_n)
+    for v in progress(views, desc="edi: latent frames", total=v_n, unit="view") if opts.show_progress else views:
         if sharp[v]:
             latent[v] = (blurry[v].astype(np.float32) / 255.0)[None]
             continue
         c = float(thresholds[v])
         if mode == "e2nerf":
-            lat = edi_e2nerf(blurry[v], cum[v], c)
+            lat = edi_e2nerf(blurry[v], ve.cum[v], c)
             latent[v] = (np.clip(lat, 0.0, 255.0) / 255.0).astype(np.float32)
         else:
             if v in pol_ints:
-                lat = _latent_per_pixel(scene, v, times[v], lin[v], pol_ints[v], c_pos_map, c_neg_map, slices, hot)
-            elif integrals[v] is not None:
-                lat = edi_continuous(lin[v], cum[v], integrals[v].log_mean_exp(c), c)
+                lat = _latent_per_pixel(
+                    scene, v, times[v], lin[v], pol_ints[v], c_pos_map, c_neg_map, ve.slices, hot
+                )
+            elif ve.integrals[v] is not None:
+                lat = edi_continuous(lin[v], ve.cum[v], ve.integrals[v].log_mean_exp(c), c)
             else:
-                lat = edi_discrete(lin[v], cum[v], c)
+                lat = edi_discrete(lin[v], ve.cum[v], c)
             latent[v] = from_linear(np.clip(lat, 0.0, 1.0), scene.camera_response).astype(np.float32)
         extent[v] = blur_extent_px(latent[v])
-    return EdiResult(
-        latent=latent,
-        timestamps_us=times.astype(np.int64),
-        cum_counts=cum,
-        threshold=thresholds.astype(np.float64),
-        sharp=sharp,
-        event_count=event_count,
-        events_per_pixel=events_per_pixel,
-        blur_extent_px=extent,
-        mode=mode,
-        threshold_scope=scope,
-        scene_name=scene.name,
-        event_mask=hot,
-        threshold_pos_map=c_pos_map,
-        threshold_neg_map=c_neg_map,
-    )
+    return latent, extent
 
 
 def _per_pixel_thresholds(
