@@ -30,6 +30,8 @@ COMMANDS: dict[str, str] = {
     "train": "eigs.train.cli",
     "render": "eigs.train.render_cli",
     "evaluate": "eigs.evaluate.cli",
+    "tables": "eigs.tables.cli",
+    "figures": "eigs.tables.figures_cli",
     "metric": "eigs.metrics.cli",
     "resources": "eigs.metrics.resources_cli",
 }

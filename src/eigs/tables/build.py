@@ -1,0 +1,172 @@
+"""Build Tables I–V: rows from the config's ``tables:`` mapping (row key → run name), the paper's value beside ours in
+every cell, best and second best marked (among our runs, and separately among the paper's values; the oracle row
+is excluded from both), each row's distance to the oracle, and the run folders behind each row.
+
+Ranks are taken on the values as displayed (rounded to the column's decimals), so two rows that print the same
+number share a rank, as a reader would judge them.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field
+
+from eigs.tables.collect import RunSummary
+from eigs.tables.paper import CONFIG, CONFIG_COLUMNS, ORACLE_LABEL, TABLES, paper_value
+
+log = logging.getLogger("eigs.tables")
+
+ORACLE_KEY = "oracle"
+
+
+@dataclass(frozen=True)
+class Column:
+    """A table column: ``key`` in :class:`RunSummary.values`; ``better`` ``higher``/``lower`` ranks it (None: not
+    ranked); ``decimals`` as displayed (None: a time, printed as ``3h25m``); ``shown``: in Markdown/LaTeX too
+    (else only in the CSV)."""
+
+    key: str
+    label: str
+    better: str | None
+    decimals: int | None
+    shown: bool = True
+    paper_decimals: int | None = None  # the paper's printed precision when it differs from ``decimals``
+
+
+PSNR = Column("psnr", "PSNR↑", "higher", 2)
+SSIM = Column("ssim", "SSIM↑", "higher", 4)
+BRISQUE = Column("brisque", "BRISQUE↓", "lower", 2)
+TIME = Column("time_s", "train time", None, None)
+FPS = Column("fps", "FPS", None, 1, paper_decimals=2)
+GAUSSIANS = Column("n_gaussians", "Gaussians", None, 0, shown=False)
+EXTRA = (
+    Column("psnr_blur", "PSNR↑ blur views", "higher", 2, shown=False),
+    Column("ssim_blur", "SSIM↑ blur views", "higher", 4, shown=False),
+    Column("lpips_blur", "LPIPS↓ blur views", "lower", 4, shown=False),
+    Column("ssim_skimage", "SSIM↑ (skimage-gaussian)", "higher", 4, shown=False),
+    Column("ssim_deblurnerf", "SSIM↑ (deblurnerf)", "higher", 4, shown=False),
+)
+COLUMNS: dict[str, tuple[Column, ...]] = {
+    "table1": (
+        PSNR,
+        Column("ssim", "SSIM↑", "higher", 4, paper_decimals=2),
+        Column("lpips", "LPIPS↓", "lower", 4, paper_decimals=2),
+        BRISQUE,
+        TIME,
+        FPS,
+        GAUSSIANS,
+        *EXTRA,
+    ),
+    "table2": (PSNR, SSIM, Column("lpips", "LPIPS↓", "lower", 4, shown=False), TIME, GAUSSIANS, *EXTRA),
+    "table3": (PSNR, SSIM, TIME, Column("lpips", "LPIPS↓", "lower", 4, shown=False), GAUSSIANS, *EXTRA),
+    "table4": (PSNR, SSIM, TIME, Column("lpips", "LPIPS↓", "lower", 4, shown=False), GAUSSIANS, *EXTRA),
+    "table5": (PSNR, SSIM, TIME, Column("lpips", "LPIPS↓", "lower", 4, shown=False), GAUSSIANS, *EXTRA),
+}
+ORACLE_DELTAS = ("psnr", "ssim", "lpips")  # distance to the oracle row: ours − oracle
+
+
+@dataclass
+class Cell:
+    ours: float | None = None
+    paper: float | None = None
+    rank: int | None = None  # 1 best, 2 second best among our runs
+    paper_rank: int | None = None  # the same among the paper's values
+
+
+@dataclass
+class Row:
+    key: str
+    label: str
+    role: str  # "method" or "oracle"
+    run: str | None  # the configured run, None when the table maps no run to this row
+    summary: RunSummary | None
+    cells: dict[str, Cell] = field(default_factory=dict)
+    d_oracle: dict[str, float | None] = field(default_factory=dict)
+    config: str = ""  # Table II: "+"/"-" per configuration column
+
+    @property
+    def source(self) -> str:
+        return self.summary.source_pattern() if self.summary is not None else ""
+
+    @property
+    def n_scenes(self) -> int:
+        return len(self.summary.scenes) if self.summary is not None else 0
+
+
+@dataclass
+class Table:
+    name: str
+    title: str
+    row_header: str
+    columns: tuple[Column, ...]
+    rows: list[Row]
+
+
+def displayed(v: float | None, decimals: int | None) -> float | None:
+    if v is None or not math.isfinite(v):
+        return None
+    return round(v, decimals) if decimals is not None else v
+
+
+def rank(values: dict[int, float | None], better: str) -> dict[int, int]:
+    """Row index → 1 (best) or 2 (second best) over the finite values; equal values share a rank."""
+    finite = sorted({v for v in values.values() if v is not None}, reverse=(better == "higher"))
+    top = finite[:2]
+    return {i: top.index(v) + 1 for i, v in values.items() if v is not None and v in top}
+
+
+def build_table(name: str, mapping: dict[str, str | None], runs: dict[str, RunSummary]) -> Table:
+    """Table ``name`` (``table1`` … ``table5``) from ``mapping`` (row key → run name or None) and run summaries."""
+    spec = TABLES[name]
+    columns = COLUMNS[name]
+    keys = [k for k in spec["rows"]] + [k for k in mapping if k not in spec["rows"] and k != ORACLE_KEY]
+    if ORACLE_KEY in mapping:
+        keys.append(ORACLE_KEY)
+    rows: list[Row] = []
+    for key in keys:
+        run = mapping.get(key)
+        summary = runs.get(run) if run else None
+        if run and summary is None:
+            log.warning("%s: row %s maps to run %r, which has no evaluated results; paper values only", name, key, run)
+        oracle = key == ORACLE_KEY or (summary is not None and summary.method == "oracle")
+        label = ORACLE_LABEL if oracle else spec["rows"].get(key, {}).get("label", key)
+        row = Row(key, label, "oracle" if oracle else "method", run, summary, config=CONFIG.get(key, "")
+                  if name == "table2" else "")  # fmt: skip
+        for col in columns:
+            ours = summary.values.get(col.key) if summary is not None else None
+            ours = ours if ours is not None and math.isfinite(ours) else None
+            row.cells[col.key] = Cell(ours, paper_value(name, key, col.key))
+        rows.append(row)
+    for col in columns:
+        if col.better is None:
+            continue
+        ranked = [i for i, r in enumerate(rows) if r.role == "method"]
+        for i, k in rank({i: displayed(rows[i].cells[col.key].ours, col.decimals) for i in ranked}, col.better).items():
+            rows[i].cells[col.key].rank = k
+        for i, k in rank({i: rows[i].cells[col.key].paper for i in ranked}, col.better).items():
+            rows[i].cells[col.key].paper_rank = k
+    oracle_rows = [r for r in rows if r.role == "oracle" and r.summary is not None]
+    if len(oracle_rows) > 1:
+        log.warning("%s: %d oracle rows; distances are to the first", name, len(oracle_rows))
+    for r in rows:
+        for k in ORACLE_DELTAS:
+            if k not in r.cells:
+                continue
+            o = oracle_rows[0].cells[k].ours if oracle_rows else None
+            v = r.cells[k].ours
+            r.d_oracle[k] = v - o if v is not None and o is not None else None
+    return Table(name, spec["title"], spec["row_header"], columns, rows)
+
+
+def build_tables(mappings: dict[str, dict[str, str | None]], runs: dict[str, RunSummary]) -> list[Table]:
+    """Every table of ``mappings`` (table name → row mapping), in table order."""
+    unknown = sorted(set(mappings) - set(TABLES))
+    if unknown:
+        from eigs.errors import EigsError
+
+        raise EigsError("tables", f"unknown table(s) {', '.join(unknown)}; expected {', '.join(TABLES)}")
+    return [build_table(name, mappings[name], runs) for name in TABLES if name in mappings]
+
+
+__all__ = ["CONFIG_COLUMNS", "Cell", "Column", "Row", "Table", "build_table", "build_tables", "rank"]
