@@ -202,7 +202,97 @@ def test_truncated_png(synthetic, tmp_path, capsys):
 def test_gap_in_train_images(synthetic, tmp_path, capsys):
     (synthetic.folder / "train" / "r_2.png").unlink()
     err = expect_failure(capsys, "e2nerf-synthetic", synthetic.folder, tmp_path / "s.h5")
-    assert "train: train images must be numbered 0, 2, 4, … without gaps; missing [2]" in err
+    assert "train/r_2.png: missing: E²NeRF's loader opens it for frame 2 of transform_train.json" in err
+
+
+def _rewrite_file_paths(folder, how):
+    """Set every frame's file_path in both JSON files: ``how(k, split)`` → new value, or None to delete it."""
+    for split in ("train", "test"):
+        p = folder / f"transform_{split}.json"
+        meta = json.loads(p.read_text())
+        for k, fr in enumerate(meta["frames"]):
+            value = how(k, split)
+            if value is None:
+                fr.pop("file_path")
+            else:
+                fr["file_path"] = value
+        p.write_text(json.dumps(meta))
+
+
+def test_synthetic_file_path_is_informational(synthetic, tmp_path, caplog):
+    """As load_blender.py: frames[0:200:2] ↔ train/r_{2i}.png and frames[0:200] ↔ test/r_i.png by counting. Layouts
+    whose file_path entries are consistent, absent or arbitrary ingest to byte-identical scene files; arbitrary
+    entries are reported."""
+    outs = {}
+    for case, how in (
+        ("consistent", lambda k, split: f"./{split}/r_{k}"),
+        ("absent", lambda k, split: None),
+        ("arbitrary", lambda k, split: f"./somewhere/img_{(7 * k + 3) % 11}.png"),
+        ("empty", lambda k, split: ""),
+    ):
+        _rewrite_file_paths(synthetic.folder, how)
+        caplog.clear()
+        outs[case] = tmp_path / f"{case}.h5"
+        assert run_ingest("e2nerf-synthetic", synthetic.folder, outs[case]) == 0
+        warned = [r for r in caplog.records if "file_path" in r.getMessage() and r.levelname == "WARNING"]
+        assert bool(warned) == (case == "arbitrary"), case
+    data = {case: p.read_bytes() for case, p in outs.items()}
+    assert data["absent"] == data["consistent"] == data["arbitrary"] == data["empty"]
+    s = read_scene(outs["arbitrary"])  # and it is the layout's content, counted
+    np.testing.assert_array_equal(s.frames.blurry, synthetic.train_rgb)
+    assert np.abs(s.poses.latent_c2w - synthetic.train_mats[:, [1, 5, 9, 13, 17]] @ FLIP_YZ).max() <= 1e-12
+
+
+def test_synthetic_reads_at_most_200_frames(tmp_path):
+    """frames beyond the first 200 are not read (train: 100 views from frames 0, 2, …, 198; test: 200 frames)."""
+    lay = write_e2nerf_synthetic(tmp_path / "big", n_views=1)
+    for split in ("train", "test"):
+        p = lay.folder / f"transform_{split}.json"
+        meta = json.loads(p.read_text())
+        meta["frames"] = [meta["frames"][k % 2] for k in range(204)]
+        p.write_text(json.dumps(meta))
+    import torch
+
+    from tests.io.fixtures import save_png
+
+    rgba = np.concatenate([lay.train_rgb[0], np.full((H, W, 1), 255, np.uint8)], axis=2)
+    for k in range(1, 104):  # train r_2 … r_206 (r_200 … r_206 are beyond what E²NeRF reads)
+        save_png(lay.folder / "train" / f"r_{2 * k}.png", rgba)
+    for k in range(2, 204):
+        save_png(lay.folder / "test" / f"r_{k}.png", lay.test_rgba[k % 2])
+    torch.save(torch.zeros((100, 4, H * W), dtype=torch.float64), lay.folder / "events.pt")
+    out = tmp_path / "big.h5"
+    assert run_ingest("e2nerf-synthetic", lay.folder, out) == 0
+    s = read_scene(out)
+    assert s.n_views == 100 and len(s.sharp.kind) == 200
+    np.testing.assert_array_equal(s.sharp.view[:4], [0, -1, 1, -1])
+
+
+def test_real_images_found_as_load_llff(tmp_path):
+    """load_llff.py: sorted names ending in JPG/jpg/png (any names, no numbering), 5 poses per image."""
+    lay = write_e2nerf_real(tmp_path / "toys", n_views=2)
+    imgs = lay.folder / "images"
+    (imgs / "000.jpg").rename(imgs / "b_first.JPG")  # sorted: "b_first.JPG" < "c_second.jpg"
+    (imgs / "005.jpg").rename(imgs / "c_second.jpg")
+    (imgs / "a_ignored.jpeg").write_bytes(b"not read: load_llff.py does not list .jpeg")
+    (imgs / "notes.txt").write_text("not an image")
+    out = tmp_path / "toys.h5"
+    assert run_ingest("e2nerf-real", lay.folder, out) == 0
+    s = read_scene(out)
+    assert s.n_views == 2
+    from PIL import Image
+
+    np.testing.assert_array_equal(s.frames.blurry[0], np.asarray(Image.open(imgs / "b_first.JPG")))
+    np.testing.assert_array_equal(s.frames.blurry[1], np.asarray(Image.open(imgs / "c_second.jpg")))
+    assert np.abs(s.poses.latent_c2w - lay.c2w_cv).max() <= 1e-9  # view i ↔ rows 5i … 5i+4
+
+
+def test_real_image_count_mismatch_is_an_error(real, tmp_path, capsys):
+    from PIL import Image
+
+    Image.open(real.images[0]).save(real.folder / "images" / "010.png")  # a third image, poses for two
+    err = expect_failure(capsys, "e2nerf-real", real.folder, tmp_path / "s.h5")
+    assert "poses_bounds.npy: has 10 poses but images/ has 3 images (expected 5·3 = 15)" in err
 
 
 def test_too_few_matrices(synthetic, tmp_path, capsys):

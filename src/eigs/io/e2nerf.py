@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import json
 import logging
-import re
 from pathlib import Path
 
 import numpy as np
@@ -40,6 +39,7 @@ SYN_LATENT_ENTRIES = (1, 5, 9, 13, 17)
 SYN_LATENT_T_US = np.array([10_000, 50_000, 90_000, 130_000, 170_000], dtype=np.int64)
 SYN_BIN_EDGES_US = np.array([0, 50_000, 90_000, 130_000, 170_000], dtype=np.int64)
 SYN_TEST_ENTRY = 1  # ground truth is rendered at transform_matrix[1]
+SYN_MAX_FRAMES = 200  # load_blender.py reads frames[0:200:2] (train) and frames[0:200] (test)
 REAL_BIN_US = 25_001
 REAL_EXPOSURE_US = (0, 4 * REAL_BIN_US)
 REAL_LATENT_T_US = REAL_BIN_US * np.arange(5, dtype=np.int64)
@@ -139,18 +139,26 @@ def _rel_png(file_path: str) -> str:
     return p if p.endswith(".png") else p + ".png"
 
 
-def _frames_by_path(path: Path, meta: dict) -> dict[str, tuple[int, dict]]:
-    """Frames of a transform JSON keyed by their normalised image path (frames without one are skipped)."""
-    out: dict[str, tuple[int, dict]] = {}
-    for i, fr in enumerate(meta["frames"]):
-        if not isinstance(fr, dict) or not isinstance(fr.get("file_path"), str):
-            raise EigsError(path, f"frame {i} has no file_path")
-        if not fr["file_path"]:
-            continue  # eigs export: filler frame
-        key = _rel_png(fr["file_path"])
-        if key in out:
-            raise EigsError(path, f"frames {out[key][0]} and {i} both name {key}")
-        out[key] = (i, fr)
+def _file_path_mismatches(path: Path, frames: list, indices: list[int], expected: list[str]) -> list[str]:
+    """Frames whose ``file_path`` names another file than the one E²NeRF's loader opens for them by counting.
+
+    ``file_path`` is informational only (``load_blender.py`` never reads it): absent, empty or non-string entries
+    are fine; a string naming a different image is reported. Returns one description per mismatching frame."""
+    out = []
+    for j, want in zip(indices, expected, strict=True):
+        fr = frames[j]
+        fp = fr.get("file_path") if isinstance(fr, dict) else None
+        if isinstance(fp, str) and fp and _rel_png(fp) != want:
+            out.append(f"frame {j}: {fp!r} (read as {want})")
+    if out:
+        log.warning(
+            "%s: file_path of %d frame(s) names other images than E²NeRF's loader opens; read by index as it does "
+            "(%s%s)",
+            path,
+            len(out),
+            "; ".join(out[:3]),
+            " …" if len(out) > 3 else "",
+        )
     return out
 
 
@@ -178,29 +186,17 @@ def _eigs_time_base(path: Path, meta: dict, frames: list[dict], n_views: int) ->
     return exposure, edges, latent
 
 
-def _numbered(folder: Path, pattern: str, what: str) -> dict[int, Path]:
-    """Files in ``folder`` whose name matches ``pattern`` (one integer group) → {number: path}."""
+def llff_images(folder: Path) -> list[Path]:
+    """The images of an LLFF ``images/`` folder as ``load_llff.py`` finds them: the files whose names end in
+    ``JPG``, ``jpg`` or ``png``, sorted by name (view i = the i-th; names need not be numbers)."""
     if not folder.is_dir():
-        raise EigsError(folder, f"missing folder ({what})")
-    rx = re.compile(pattern)
-    out: dict[int, Path] = {}
-    for p in folder.iterdir():
-        m = rx.fullmatch(p.name)
-        if m:
-            out[int(m.group(1))] = p
+        raise EigsError(folder, "missing folder (images)")
+    out = sorted(
+        (p for p in folder.iterdir() if p.is_file() and p.name.endswith(("JPG", "jpg", "png"))), key=lambda p: p.name
+    )
     if not out:
-        raise EigsError(folder, f"holds no {what}")
+        raise EigsError(folder, "holds no images (*.png, *.jpg, *.JPG, as load_llff.py reads)")
     return out
-
-
-def _check_sequence(folder: Path, numbers: list[int], step: int, what: str) -> None:
-    """``numbers`` must be exactly 0, step, 2·step, … (view i is number step·i)."""
-    odd = sorted(n for n in numbers if n % step)
-    if odd:
-        raise EigsError(folder, f"{what} must be numbered 0, {step}, {2 * step}, …; found {odd[:5]}")
-    missing = sorted(set(range(0, max(numbers) + 1, step)) - set(numbers))
-    if missing:
-        raise EigsError(folder, f"{what} must be numbered 0, {step}, {2 * step}, … without gaps; missing {missing[:5]}")
 
 
 def _intrinsics_override(opts: IngestOptions, K: np.ndarray, source_desc: str) -> tuple[np.ndarray, np.ndarray, str]:
@@ -230,23 +226,33 @@ def read_e2nerf_synthetic(folder: Path, opts: IngestOptions) -> tuple[Scene, lis
     angle = meta.get("camera_angle_x")
     if not isinstance(angle, (int, float)) or not np.isfinite(angle) or not 0 < angle < np.pi:
         raise EigsError(train_json, f"camera_angle_x must be a number in (0, π), got {angle!r}")
-    by_path = _frames_by_path(train_json, meta)
-
-    imgs = _numbered(folder / "train", r"r_(\d+)\.png", "train images r_N.png")
-    _check_sequence(folder / "train", list(imgs), 2, "train images")
-    nums = sorted(imgs)
-    n_views = len(nums)
+    # load_blender.py: meta['frames'][0:200:2] with images train/r_{2i}.png, counted, never via file_path
+    frames = meta["frames"]
+    train_idx = list(range(0, min(len(frames), SYN_MAX_FRAMES), 2))
+    if not train_idx:
+        raise EigsError(train_json, "has no frames")
+    n_views = len(train_idx)
+    img_paths = [folder / "train" / f"r_{2 * v}.png" for v in range(n_views)]
+    if not (folder / "train").is_dir():
+        raise EigsError(folder / "train", "missing folder (train images r_N.png)")
+    for v, p in enumerate(img_paths):
+        if not p.is_file():
+            raise EigsError(p, f"missing: E²NeRF's loader opens it for frame {train_idx[v]} of {train_json.name}")
+    wanted = set(img_paths)
+    unread = sorted(q.name for q in (folder / "train").glob("r_*.png") if q not in wanted)
+    if unread:
+        notes.append(f"train/ images not read (E²NeRF reads r_0 … r_{2 * (n_views - 1)}): {', '.join(unread[:5])}")
+    mismatch = _file_path_mismatches(train_json, frames, train_idx, [f"train/{p.name}" for p in img_paths])
+    if mismatch:
+        notes.append(f"warning: {len(mismatch)} train frame file_path(s) name other images; read by index")
     latent = np.empty((n_views, len(SYN_LATENT_ENTRIES), 4, 4))
     train_frames = []
-    for v, n in enumerate(nums):
-        if f"train/r_{n}.png" not in by_path:
-            raise EigsError(train_json, f"no frame has file_path ./train/r_{n} (for train/r_{n}.png)")
-        i, fr = by_path[f"train/r_{n}.png"]
-        m = _frame_matrices(train_json, fr, i, max(SYN_LATENT_ENTRIES) + 1)
+    for v, j in enumerate(train_idx):
+        m = _frame_matrices(train_json, frames[j], j, max(SYN_LATENT_ENTRIES) + 1)
         latent[v] = m[list(SYN_LATENT_ENTRIES)]
-        train_frames.append(fr)
+        train_frames.append(frames[j])
     latent = blender_to_opencv(latent)
-    blurry = read_images([imgs[n] for n in nums], desc="train images")
+    blurry = read_images(img_paths, desc="train images")
     _, h, w, c = blurry.shape
 
     base = _eigs_time_base(train_json, meta, train_frames, n_views)
@@ -271,17 +277,15 @@ def read_e2nerf_synthetic(folder: Path, opts: IngestOptions) -> tuple[Scene, lis
     if test_json.is_file():
         tmeta = _read_json(test_json)
         test_imgs, test_c2w, test_kind, test_view = [], [], [], []
-        for i, fr in enumerate(tmeta["frames"]):
-            fp = fr.get("file_path") if isinstance(fr, dict) else None
-            if not isinstance(fp, str):
-                raise EigsError(test_json, f"frame {i} has no file_path")
-            name = Path(fp).name if Path(fp).suffix == ".png" else Path(fp).name + ".png"
-            m = re.fullmatch(r"r_(\d+)\.png", name)
-            if not m:
-                raise EigsError(test_json, f"frame {i}: file_path {fp!r} is not …/r_N")
-            k = int(m.group(1))
-            mats = _frame_matrices(test_json, fr, i, SYN_TEST_ENTRY + 1)
-            test_imgs.append(folder / "test" / name)
+        tframes = tmeta["frames"][:SYN_MAX_FRAMES]  # load_blender.py: frames[0:200], images test/r_{i}.png
+        test_imgs = [folder / "test" / f"r_{k}.png" for k in range(len(tframes))]
+        mismatch = _file_path_mismatches(
+            test_json, tframes, list(range(len(tframes))), [f"test/r_{k}.png" for k in range(len(tframes))]
+        )
+        if mismatch:
+            notes.append(f"warning: {len(mismatch)} test frame file_path(s) name other images; read by index")
+        for k, fr in enumerate(tframes):
+            mats = _frame_matrices(test_json, fr, k, SYN_TEST_ENTRY + 1)
             test_c2w.append(mats[SYN_TEST_ENTRY])
             if k % 2 == 0:
                 if k // 2 >= n_views:
@@ -339,10 +343,8 @@ def read_e2nerf_real(folder: Path, opts: IngestOptions) -> tuple[Scene, list[str
 
     if not folder.is_dir():
         raise EigsError(folder, "no such folder")
-    imgs = _numbered(folder / "images", r"(\d+)\.(?:jpg|JPG|jpeg|png)", "images NNN.jpg")
-    _check_sequence(folder / "images", list(imgs), REAL_POSES_PER_VIEW, "images")
-    nums = sorted(imgs)
-    n_views = len(nums)
+    img_paths = llff_images(folder / "images")
+    n_views = len(img_paths)
 
     pb_path = folder / "poses_bounds.npy"
     if not pb_path.is_file():
@@ -366,7 +368,7 @@ def read_e2nerf_real(folder: Path, opts: IngestOptions) -> tuple[Scene, list[str
     if np.any(np.abs(hwf - hwf[0]) > 1e-9 * np.abs(hwf[0])):
         raise EigsError(pb_path, "rows disagree on the camera (h, w, focal): one shared camera expected")
 
-    blurry = read_images([imgs[n] for n in nums], desc="images")
+    blurry = read_images(img_paths, desc="images")
     _, h, w, c = blurry.shape
     fh, fw, focal = (float(v) for v in hwf[0])
     if (fh, fw) != (float(h), float(w)):
