@@ -31,7 +31,7 @@ def _e2nerf_reference(blur_255: np.ndarray, bins: np.ndarray, c: float = 0.3) ->
     return np.stack([i0 * np.exp(c * sk)[..., None] for sk in s])
 
 
-def _scene(blurry, events=None, binned=None, exposure=None, source="", response="linear"):
+def _scene(blurry, events=None, binned=None, exposure=None, source="", response="linear", t_us=None):
     v, h, w, ch = blurry.shape
     return Scene(
         name="t",
@@ -39,7 +39,7 @@ def _scene(blurry, events=None, binned=None, exposure=None, source="", response=
         channels=ch,
         camera_response=response,
         source=source,
-        frames=Frames(blurry, exposure),
+        frames=Frames(blurry, exposure, t_us),
         events=events,
         binned=binned,
     )
@@ -128,6 +128,23 @@ def test_zero_events_give_the_blurry_frame():
         assert res.sharp.all() and res.mode == "estimated"
         np.testing.assert_allclose(res.latent, np.broadcast_to(blur[:, None] / 255.0, res.latent.shape), atol=1e-6)
         np.testing.assert_array_equal(res.timestamps_us[:, [0, -1]], exposure)
+
+
+def test_instantaneous_frames_pass_through_at_their_timestamps():
+    """Frames with timestamps and no exposure windows are instants: no event lies inside them, so every view is
+    passed through unchanged, every latent time is the frame's timestamp; raw events elsewhere do not matter."""
+    rng = np.random.default_rng(4)
+    blur = rng.integers(0, 256, size=(3, 6, 8, 1)).astype(np.uint8)
+    t_us = np.array([0, 38_766, 77_531], np.int64)
+    n = 300
+    t = np.sort(rng.integers(0, 80_000, n)).astype(np.int64)
+    ev = Events(rng.integers(0, 8, n).astype(np.uint16), rng.integers(0, 6, n).astype(np.uint16), t,
+                rng.choice(np.array([-1, 1], np.int8), n))
+    for events in (None, ev):
+        res = compute_edi(_scene(blur, events=events, t_us=t_us), EdiOptions(bins=4, show_progress=False))
+        assert res.sharp.all() and res.event_count.tolist() == [0, 0, 0]
+        np.testing.assert_array_equal(res.timestamps_us, np.repeat(t_us[:, None], 5, axis=1))
+        np.testing.assert_allclose(res.latent, np.broadcast_to(blur[:, None] / 255.0, res.latent.shape), atol=1e-6)
 
 
 def test_sparse_view_is_marked_sharp_and_copied():

@@ -122,6 +122,25 @@ def test_frames_exposure_offsets_and_groundtruth(recording, tmp_path):
     np.testing.assert_allclose(s.trajectory.c2w[:, :3, 3], pos)
 
 
+def test_frames_without_exposure_keep_their_timestamps(recording, tmp_path, capsys):
+    """images.txt without --exposure-us: the frames are instants with their timestamps (µs); events are kept."""
+    folder, ev = recording
+    px, names = write_frames(folder, 3, channels=1)
+    ft_s = [0.0, 0.038766001, 0.077531001]  # ECD slider_depth's first three times
+    (folder / "images.txt").write_text("".join(f"{t:.9f} {n}\n" for t, n in zip(ft_s, names, strict=True)))
+    out = tmp_path / "s.h5"
+    assert run_ingest("txt", folder, out) == 0
+    assert "frames are instants" in capsys.readouterr().out
+    s = read_scene(out)
+    assert s.frames.exposure_us is None
+    np.testing.assert_array_equal(s.frames.t_us, [0, 38_766, 77_531])
+    np.testing.assert_array_equal(s.frames.blurry, px)
+    np.testing.assert_array_equal(s.events.t, ev.t_us)
+    out2 = tmp_path / "s2.h5"  # --views keeps the timestamps of the kept frames
+    assert run_ingest("txt", folder, out2, "--views", "1:3") == 0
+    np.testing.assert_array_equal(read_scene(out2).frames.t_us, [38_766, 77_531])
+
+
 def test_rgb_only_folder(tmp_path):
     folder = tmp_path / "slider"
     folder.mkdir()

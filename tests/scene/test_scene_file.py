@@ -94,7 +94,7 @@ def assert_same(a: Scene, b: Scene) -> None:
     np.testing.assert_array_equal(a.camera.K, b.camera.K)
     assert (a.camera.width, a.camera.height) == (b.camera.width, b.camera.height)
     for part, fields in (
-        ("frames", ("blurry", "exposure_us")),
+        ("frames", ("blurry", "exposure_us", "t_us")),
         ("events", ("x", "y", "t", "p", "view_index")),
         ("binned", ("counts", "bin_edges_us")),
         ("poses", ("latent_c2w", "latent_t_us")),
@@ -133,6 +133,32 @@ def test_round_trip(tmp_path, kw, compression):
     back = read_scene(path)
     assert_same(scene, back)
     assert "scene 'unit'" in summarize(back)
+
+
+def test_frame_timestamps_round_trip_and_version_1_files(tmp_path):
+    """Version 2 keeps frames/t_us for frames without exposure windows; a version 1 file (no t_us) still reads."""
+    scene = make_scene(raw=False)
+    scene.frames.exposure_us = None
+    scene.frames.t_us = np.array([5, 40_000, 77_531], np.int64)
+    path = tmp_path / "scene.h5"
+    write_scene(scene, path)
+    back = read_scene(path)
+    assert_same(scene, back)
+    assert "instants" in summarize(back)
+    with h5py.File(path, "r") as f:
+        assert int(f.attrs["version"]) == 2
+    old = make_scene()
+    write_scene(old, tmp_path / "v1.h5")
+    with h5py.File(tmp_path / "v1.h5", "r+") as f:  # what version 1 wrote: the same layout without frames/t_us
+        f.attrs["version"] = 1
+    assert_same(old, read_scene(tmp_path / "v1.h5"))
+    scene.frames.exposure_us = np.zeros((V, 2), np.int64)
+    with pytest.raises(EigsError, match="frames/t_us is for frames without exposure windows"):
+        write_scene(scene, tmp_path / "both.h5")
+    scene.frames.exposure_us = None
+    scene.frames.t_us = np.array([1, 2], np.int64)
+    with pytest.raises(EigsError, match="frames/t_us has shape 2, expected 3"):
+        write_scene(scene, tmp_path / "short.h5")
 
 
 def test_read_events_slice_and_lazy_header(tmp_path):

@@ -134,7 +134,9 @@ def compute_edi(scene: Scene, opts: EdiOptions, path: str = "") -> EdiResult:
     if not raw and not prebinned:
         log.warning("the scene has no events: every view is passed through as sharp")
     hot = _hot_pixel_mask(scene, opts, mode, raw, prebinned)
-    ve = _view_events(path, scene, opts, mode, bins, times, hot, raw, prebinned)
+    # instantaneous frames (no exposure windows) have no events inside them: zero counts, passed through
+    in_exposures = raw and scene.frames.exposure_us is not None
+    ve = _view_events(path, scene, opts, mode, bins, times, hot, in_exposures, prebinned)
     h, w = scene.frames.blurry.shape[1:3]
     sharp, active = _sharp_views(ve.event_count, h, w)
     lin = _linear_frames(scene, mode, active)
@@ -176,13 +178,17 @@ def _bins_and_times(
     path: str, scene: Scene, opts: EdiOptions, raw: bool, prebinned: bool
 ) -> tuple[int, np.ndarray]:
     """B and the (V, B + 1) int64 latent times (µs): the scene's bin edges when pre-binned, else
-    :func:`choose_latent_times` (zeros, or the scene's latent times, when the frames have no exposure times)."""
+    :func:`choose_latent_times`; for instantaneous frames (``frames.t_us``, no exposure windows) every latent
+    time is the frame's timestamp; with neither, zeros (or the scene's latent times)."""
     assert scene.frames is not None
     if prebinned:
         assert scene.binned is not None
         bins = binning.check_prebinned(path, scene.binned.n_bins, opts.bins)
         return bins, scene.binned.bin_edges_us.astype(np.int64)
     bins = binning.check_bins(opts.bins if opts.bins is not None else DEFAULT_BINS)
+    if scene.frames.exposure_us is None and scene.frames.t_us is not None:
+        log.info("frames are instants (timestamps, no exposure windows): every view is passed through as sharp")
+        return bins, np.repeat(scene.frames.t_us.astype(np.int64)[:, None], bins + 1, axis=1)
     if raw and (scene.frames.exposure_us is None):
         raise EigsError(
             path,

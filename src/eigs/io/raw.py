@@ -166,10 +166,16 @@ def ingest_raw(src: RawSource, out: str | Path, opts: IngestOptions) -> str:
         exposure = src.frame_t_us[:, None] + np.asarray(opts.exposure_us, dtype=np.int64)[None, :]
 
     views = _views(src, opts, exposure)
+    frame_t_kept = None
     if exposure is None and views.size:
-        src.notes.append(
-            "frame timestamps are not stored (a scene keeps exposure windows); --exposure-us START,END keeps them"
-        )
+        if src.frame_t_us is not None:
+            frame_t_kept = np.ascontiguousarray(src.frame_t_us[views], dtype=np.int64)
+            src.notes.append(
+                "frames are instants (timestamps kept, no exposure windows: EDI passes them through); "
+                "--exposure-us START,END gives them exposure windows"
+            )
+        else:
+            src.notes.append("frames have neither timestamps nor exposure windows")
     exposure_kept = None if exposure is None else np.ascontiguousarray(exposure[views])
 
     keep_mode = opts.keep_events or ("exposures" if exposure_kept is not None else "all")
@@ -200,7 +206,7 @@ def ingest_raw(src: RawSource, out: str | Path, opts: IngestOptions) -> str:
         channels = int(blurry.shape[3])
         if undistorter is not None:
             blurry = undistorter.frames(blurry)
-        frames = Frames(blurry=blurry, exposure_us=exposure_kept)
+        frames = Frames(blurry=blurry, exposure_us=exposure_kept, t_us=frame_t_kept)
 
     header = Scene(
         name=opts.name or src.name,

@@ -21,5 +21,5 @@ def run(args: argparse.Namespace) -> int:
     if args.action == "info":
         print(summarize(scene))
     else:
-        print(f"{args.scene}: valid eigs scene (version 1)")
+        print(f"{args.scene}: valid eigs scene")
     return 0

@@ -1,4 +1,4 @@
-"""Reading and writing scene files (HDF5, version 1). The only module that knows the HDF5 paths.
+"""Reading and writing scene files (HDF5, version 2; version 1 is read too). The only module that knows the HDF5 paths.
 
 Writes are atomic (temporary file + rename) and validated; reads are validated. Large event streams can be
 written chunk by chunk with :class:`SceneWriter` and read by slices with :func:`read_events`.
@@ -18,6 +18,7 @@ from eigs.errors import EigsError
 from eigs.scene.model import (
     FORMAT_NAME,
     FORMAT_VERSION,
+    READABLE_VERSIONS,
     BinnedEvents,
     Camera,
     Events,
@@ -52,9 +53,10 @@ def _open_read(path: str | os.PathLike) -> h5py.File:
     if fmt != FORMAT_NAME:
         f.close()
         raise EigsError(p, f"not an eigs scene file (attribute format={fmt!r})")
-    if version != FORMAT_VERSION:
+    if version not in READABLE_VERSIONS:
         f.close()
-        raise EigsError(p, f"scene format version {version} is not supported (this eigs reads {FORMAT_VERSION})")
+        readable = ", ".join(map(str, READABLE_VERSIONS))
+        raise EigsError(p, f"scene format version {version} is not supported (this eigs reads {readable})")
     return f
 
 
@@ -128,6 +130,8 @@ class SceneWriter:
             g.attrs["exposure_known"] = s.frames.exposure_us is not None
             if s.frames.exposure_us is not None:
                 g.create_dataset("exposure_us", data=s.frames.exposure_us)
+            if s.frames.t_us is not None:
+                g.create_dataset("t_us", data=s.frames.t_us)
         if s.binned is not None:
             self._ds("events/binned", s.binned.counts)
             self._f.create_dataset("events/bin_edges_us", data=s.binned.bin_edges_us)
@@ -220,7 +224,9 @@ def _read_header(f: h5py.File) -> Scene:
     )
     frames = None
     if "frames" in f:
-        frames = Frames(blurry=f["frames/blurry"][()], exposure_us=_opt(f, "frames/exposure_us"))
+        frames = Frames(
+            blurry=f["frames/blurry"][()], exposure_us=_opt(f, "frames/exposure_us"), t_us=_opt(f, "frames/t_us")
+        )
     binned = None
     if "events/binned" in f:
         binned = BinnedEvents(counts=f["events/binned"][()], bin_edges_us=f["events/bin_edges_us"][()])

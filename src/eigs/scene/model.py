@@ -1,4 +1,4 @@
-"""In-memory form of a scene file (version 1): what a data source provides, nothing derived.
+"""In-memory form of a scene file (version 2, version 1 read too): what a data source provides, nothing derived.
 
 Conventions (see docs/scene-format.md): camera-to-world 4×4 matrices in OpenCV axes (x right, y down,
 z forward); intrinsics with pixel centres at (j + 0.5, i + 0.5); time in int64 microseconds; event polarity
@@ -15,7 +15,8 @@ import numpy as np
 from eigs.errors import EigsError
 
 FORMAT_NAME = "eigs-scene"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+READABLE_VERSIONS = (1, 2)  # version 2 added frames/t_us
 CAMERA_RESPONSES = ("linear", "srgb", "unknown")
 POSE_SOURCES = ("ground-truth", "estimated")
 SHARP_KIND_BLUR_VIEW = 0  # ground truth at a training view's first latent time
@@ -41,10 +42,13 @@ class Camera:
 @dataclass
 class Frames:
     """Motion-blurred frames. ``blurry``: (V, H, W, C) uint8, C ∈ {1, 3} (RGB);
-    ``exposure_us``: (V, 2) int64 [start, end) per view, or None when the source does not know it."""
+    ``exposure_us``: (V, 2) int64 [start, end) per view, or None when the source does not know it;
+    ``t_us``: (V,) int64 timestamp of each frame when there is no exposure window (the frame is then an instant),
+    else None. At most one of the two is set."""
 
     blurry: np.ndarray
     exposure_us: np.ndarray | None = None
+    t_us: np.ndarray | None = None
 
     @property
     def n_views(self) -> int:

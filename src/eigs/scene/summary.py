@@ -17,7 +17,14 @@ def summarize(scene: Scene, dropped_events: int = 0) -> str:
         + (
             ""
             if scene.frames is None
-            else " blurry frames" + ("" if scene.frames.exposure_us is not None else " (exposure unknown)")
+            else " blurry frames"
+            + (
+                ""
+                if scene.frames.exposure_us is not None
+                else " (instants: timestamps, no exposure windows)"
+                if scene.frames.t_us is not None
+                else " (exposure unknown)"
+            )
         ),
     ]
     if scene.frames is not None and scene.frames.exposure_us is not None and scene.n_views:

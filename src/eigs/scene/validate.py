@@ -1,4 +1,4 @@
-"""Validation of a scene (version 1), on write and on read.
+"""Validation of a scene (version 2), on write and on read.
 
 Each check raises :class:`EigsError` naming the file and the problem. Event arrays are checked in chunks so
 validating 100 M events needs little extra memory.
@@ -167,6 +167,11 @@ def validate_header(path: str, scene: Scene) -> None:
                     f"frames/exposure_us: view {v} ends ({f.exposure_us[v, 1]} µs) before it starts "
                     f"({f.exposure_us[v, 0]} µs)",
                 )
+        if f.t_us is not None:
+            if f.exposure_us is not None:
+                raise EigsError(path, "frames/t_us is for frames without exposure windows, but exposure_us is set too")
+            _dtype(path, "frames/t_us", f.t_us, np.int64)
+            _shape(path, "frames/t_us", f.t_us, (f.n_views,))
     if scene.binned is not None:
         b = scene.binned
         _dtype(path, "events/binned", b.counts, np.int32)
