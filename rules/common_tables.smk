@@ -1,0 +1,51 @@
+# Helpers of rules/evaluate.smk and rules/tables.smk (evaluation, tables, figures); needs rules/common.smk.
+
+
+# --- evaluate -------------------------------------------------------------------------------------------------
+def eval_targets():
+    """metrics.json of every (run, scene) that rule train makes."""
+    return [
+        f"results/{scene}/b{run_bins(run)}/eval/{run}/metrics.json" for run in sorted(RUNS) for scene in run_scenes(run)
+    ]
+
+
+def evaluate_options(wildcards):
+    """`eigs evaluate` flags from the `evaluate:` config section (unset options keep the CLI's defaults)."""
+    e = config["evaluate"]
+    return f"--orbit-frames {int(e['orbit_frames'])}" if "orbit_frames" in e else ""
+
+
+# --- tables and figures ---------------------------------------------------------------------------------------
+TABLE_NAMES = ["table1", "table2", "table3", "table4", "table5"]
+
+
+def tables_json():
+    """The `tables:` mapping restricted to configured runs (others -> null: paper values only), shell-quoted JSON."""
+    t = config["tables"]
+    values = {name: {row: (run if run in RUNS else None) for row, run in t[name].items()} for name in t}
+    return shlex.quote(json.dumps(values, separators=(",", ":")))
+
+
+def grid_runs():
+    """Runs in the qualitative grids: Table I's rows that have a run, in the table's order (comma-separated)."""
+    out = []
+    for run in config["tables"]["table1"].values():
+        if run in RUNS and run not in out:
+            out.append(run)
+    return ",".join(out) or ",".join(sorted(RUNS))
+
+
+def figure_scenes():
+    """Scenes that get a qualitative grid: every scene some run is trained on."""
+    return sorted({s for run in RUNS for s in run_scenes(run)})
+
+
+def figure_inputs(wildcards):
+    """The run folders' files, scene files and EDI latent folders the figures read (besides metrics.json)."""
+    out = []
+    for run in sorted(RUNS):
+        for scene in run_scenes(run):
+            b = run_bins(run)
+            out += [f"results/{scene}/b{b}/{run}/train_log.csv", f"results/{scene}/b{b}/{run}/config.json",
+                    f"results/{scene}/scene.h5", f"results/{scene}/b{b}/latent"]  # fmt: skip
+    return sorted(set(out))
