@@ -12,7 +12,7 @@ def eval_targets():
 def evaluate_options(wildcards):
     """`eigs evaluate` flags from the `evaluate:` config section (unset options keep the CLI's defaults)."""
     e = config["evaluate"]
-    return f"--orbit-frames {int(e['orbit_frames'])}" if "orbit_frames" in e else ""
+    return f"--path-frames {int(e['path_frames'])}" if "path_frames" in e else ""
 
 
 # --- tables and figures ---------------------------------------------------------------------------------------

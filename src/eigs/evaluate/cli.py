@@ -1,4 +1,4 @@
-"""``eigs evaluate``: score a trained run (renders at the test cameras, or BRISQUE on training views and an orbit)."""
+"""``eigs evaluate``: score a trained run (test-camera renders, or BRISQUE on training views and a render path)."""
 
 from __future__ import annotations
 
@@ -16,8 +16,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("scene", help="scene file (scene.h5): ground truth, background")
     p.add_argument("sfm", help="SfM output directory (poses.h5, test_cameras.h5)")
     p.add_argument("-o", "--output", required=True, help="metrics.json to write")
-    p.add_argument("--orbit-frames", type=int, default=None, help="orbit renders on scenes without ground truth "
-                   "(default 120)")  # fmt: skip
+    p.add_argument("--path-frames", type=int, default=None, help="render-path frames (ellipse or orbit) scored on "
+                   "scenes without ground truth (default 120)")  # fmt: skip
     p.add_argument("--resources", default=None, metavar="DIR", help="model files made by `eigs resources`")
     p.add_argument("--device", default="auto", choices=("auto", "cpu", "cuda"))
 
@@ -26,13 +26,13 @@ def run(args: argparse.Namespace) -> int:
     import logging
 
     from eigs.errors import EigsError
-    from eigs.evaluate.core import DEFAULT_ORBIT_FRAMES, evaluate_run
+    from eigs.evaluate.core import DEFAULT_PATH_FRAMES, evaluate_run
 
-    frames = DEFAULT_ORBIT_FRAMES if args.orbit_frames is None else args.orbit_frames
+    frames = DEFAULT_PATH_FRAMES if args.path_frames is None else args.path_frames
     if frames < 0:
-        raise EigsError("--orbit-frames", "must be >= 0")
+        raise EigsError("--path-frames", "must be >= 0")
     res = evaluate_run(args.run, args.scene, args.sfm, args.output, resources=args.resources,
-                       orbit_frames=frames, device=args.device)  # fmt: skip
+                       path_frames=frames, device=args.device)  # fmt: skip
     m = res["metrics"]
     summary = ", ".join(
         f"{k}: " + " ".join(f"{n}={v:.4g}" for n, v in g.items() if isinstance(v, float)) for k, g in m.items()

@@ -6,9 +6,10 @@ separately for blur views (kind 0: a training view's ground truth at its first l
 novel views (kind 1). Cameras come only from ``test_cameras.h5`` (docs/sfm.md, "Test cameras").
 
 Scenes without ground truth: BRISQUE of renders at the training views' reference poses (latent k = 0 of
-``poses.h5``) and on an orbit (:func:`eigs.util.cameras.orbit_cameras`), as E²NeRF's real protocol (blur views plus a
-render path). An image whose BRISQUE is undefined (e.g. constant: an orbit frame that misses the scene) is counted
-in ``brisque_undefined`` and left out of the mean, never scored silently.
+``poses.h5``) and on a render path (:func:`eigs.util.cameras.render_path`: an ellipse across the viewing direction
+for forward-facing captures, else an orbit), as E²NeRF's real protocol (blur views plus a render path). An image
+whose BRISQUE is undefined (e.g. constant: a path frame that misses the scene) is counted in ``brisque_undefined``
+and left out of the mean, never scored silently.
 
 Every run also reports training seconds and steps (``config.json``), the number of Gaussians and the test-time
 frames per second (render only, after a warm-up render).
@@ -33,7 +34,7 @@ log = logging.getLogger("eigs.evaluate")
 SSIM_TABLE_MODE = "3dgs"  # the lineage the tables show (docs/metrics.md)
 LPIPS_NET = "alex"
 KIND_NAMES = {0: "blur", 1: "novel"}
-DEFAULT_ORBIT_FRAMES = 120  # E²NeRF's real protocol: 120 path renders beside the blur views
+DEFAULT_PATH_FRAMES = 120  # E²NeRF's real protocol: 120 path renders beside the blur views
 
 
 def read_run_config(run_dir: Path) -> dict[str, Any]:
@@ -78,14 +79,14 @@ def evaluate_run(
     output: str | Path,
     *,
     resources: str | None = None,
-    orbit_frames: int = DEFAULT_ORBIT_FRAMES,
+    path_frames: int = DEFAULT_PATH_FRAMES,
     device: str = "auto",
 ) -> dict[str, Any]:
     """Evaluate ``run_dir``; write ``output`` (metrics.json), ``per_image.csv`` and ``renders/`` beside it.
 
     Returns the metrics document (also written). Layout of ``renders/``: synthetic scenes ``blur/``, ``novel/``
     (renders) and ``gt_blur/``, ``gt_novel/`` (ground truth), files ``{row:04d}.png`` with the row of the image in
-    the scene's ``gt/sharp``; other scenes ``train/{view:04d}.png`` and ``orbit/{i:04d}.png``.
+    the scene's ``gt/sharp``; other scenes ``train/{view:04d}.png`` and ``path/{i:04d}.png``.
     """
     import torch
 
@@ -94,7 +95,7 @@ def evaluate_run(
     from eigs.evaluate.renderer import cloud_tensors, render_uint8
     from eigs.scene import read_scene
     from eigs.util.atomic import atomic_path
-    from eigs.util.cameras import orbit_cameras
+    from eigs.util.cameras import render_path
     from eigs.util.image import write_png
 
     run_dir, sfm_dir, output = Path(run_dir), Path(sfm_dir), Path(output)
@@ -118,6 +119,7 @@ def evaluate_run(
 
     rows: list[dict[str, Any]] = []
     groups: dict[str, dict[str, Any]] = {}
+    path_kind = ""
     times: list[float] = []
     renders_dir = output.parent / "renders"
     with atomic_path(renders_dir, directory=True) as tmp:
@@ -145,10 +147,10 @@ def evaluate_run(
             if not valid.any():
                 raise EigsError(sfm_dir, "no training view has a valid reference pose (latent k = 0)")
             views = np.nonzero(valid)[0]
-            orbit = orbit_cameras(poses.c2w[valid, 0], orbit_frames)
+            path, path_kind = render_path(poses.c2w[valid, 0], path_frames)
             sets = {
                 "train": (poses.c2w[valid, 0], [f"{v:04d}.png" for v in views]),
-                "orbit": (orbit, [f"{i:04d}.png" for i in range(orbit_frames)]),
+                "path": (path, [f"{i:04d}.png" for i in range(path_frames)]),
             }
             for name, (c2w, names) in sets.items():
                 if len(c2w) == 0:
@@ -211,7 +213,7 @@ def evaluate_run(
         "test_cameras": (
             {v: int(np.sum(tc.method == k)) for k, v in METHODS.items()} if has_gt and tc is not None else None
         ),
-        "orbit_frames": None if has_gt else int(orbit_frames),
+        "path": None if has_gt else {"kind": path_kind, "frames": int(path_frames)},
     }
     with atomic_path(output.parent / "per_image.csv") as tmp:
         tmp.write_text(per_image_csv(rows))
