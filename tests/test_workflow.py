@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 import pytest
+import yaml
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -17,11 +18,34 @@ def snakemake(*args: str, cwd: Path = REPO) -> subprocess.CompletedProcess:
     )
 
 
+def job_counts(stdout: str) -> dict[str, int]:
+    """The ``Job stats`` table of a dry run as {rule: count}."""
+    lines = stdout.split("Job stats:", 1)[1].strip().splitlines()[2:]
+    counts: dict[str, int] = {}
+    for line in lines:
+        parts = line.split()
+        if len(parts) != 2 or not parts[1].isdigit():
+            break
+        counts[parts[0]] = int(parts[1])
+    return counts
+
+
 @pytest.mark.parametrize("config", ["config/config.yaml", "config/toy.yaml"])
 def test_dry_run_whole_dag(config):
+    """The dry run plans exactly one job per scene (and per configured bin count) for each upstream stage,
+    counted independently from the YAML file."""
     proc = snakemake("all", "-n", "--forceall", "--cores", "2", f"--configfile={config}")
     assert proc.returncode == 0, proc.stdout + proc.stderr
-    assert "synth" in proc.stdout
+    cfg = yaml.safe_load((REPO / config).read_text())
+    scenes = cfg["scenes"]
+    n_bins = len(cfg.get("edi", {}).get("bins", [4]))
+    builtin = sum("builtin" in s for s in scenes.values())
+    ingested = sum("source" in s for s in scenes.values())
+    counts = job_counts(proc.stdout)
+    expected = {"synth": builtin, "ingest": ingested, "edi": len(scenes) * n_bins, "sfm": len(scenes) * n_bins}
+    expected["init"] = expected["sfm"]
+    assert {k: counts.get(k, 0) for k in expected} == expected, proc.stdout
+    assert counts["all"] == 1 and counts["total"] == sum(v for k, v in counts.items() if k != "total")
 
 
 def test_configfile_replaces_the_default_config():

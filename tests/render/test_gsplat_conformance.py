@@ -14,6 +14,7 @@ import torch
 from render_scenes import LEAF_NAMES, random_scene, rel_l2
 
 from eigs.render import rasterize
+from tests.conftest import require
 
 pytestmark = pytest.mark.skipif(
     not torch.cuda.is_available(), reason="needs a CUDA GPU (absent on CI machines); runs on GPU hosts"
@@ -21,8 +22,6 @@ pytestmark = pytest.mark.skipif(
 
 
 def _require_gsplat() -> None:
-    from conftest import require
-
     require(importlib.util.find_spec("gsplat") is not None, "gsplat (pip install 'eigs[gpu]') is not installed")
 
 
