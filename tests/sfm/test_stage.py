@@ -14,7 +14,7 @@ from eigs.artifacts.edi import latent_png_name
 from eigs.artifacts.poses import METHOD_FALLBACK, METHOD_GIVEN, METHOD_REGISTERED, read_poses, read_test_cameras
 from eigs.cli import main
 from eigs.errors import EigsError
-from eigs.sfm.align import Sim3, extent
+from eigs.sfm.align import Sim3, extent, umeyama
 from eigs.sfm.colmap import c2w_of
 from eigs.sfm.run import SfmConfig, run_sfm
 
@@ -63,7 +63,11 @@ def test_given_mode_reproduces_poses_and_triangulates_on_the_surfaces(scene8, tm
     tc = read_test_cameras(out)
     assert len(tc) == 11 and np.all(tc.method == METHOD_GIVEN)
     np.testing.assert_allclose(tc.c2w, canon.apply_c2w(scene8["sharp_c2w"]), atol=1e-12)
-    assert report["accuracy"]["ate_rmse"] < 1e-9
+    # the reported alignment of the estimate onto ground truth is the inverse of the canonical transform
+    # (given mode places the ground truth in the canonical frame), and the ATE after it is zero
+    est_to_gt = Sim3.from_dict(report["accuracy"]["sim3_est_to_gt"])
+    np.testing.assert_allclose(est_to_gt.compose(canon).matrix(), np.eye(4), atol=1e-9)
+    assert 0 <= report["accuracy"]["ate_rmse"] < 1e-9
     # init from this model
     ply = tmp_path / "init.ply"
     assert main(["init", str(out), "-o", str(ply), "--min-points", "10"]) == 0
@@ -113,11 +117,16 @@ def test_unregistered_latents_are_interpolated_within_their_view(scene8, tmp_pat
         assert not poses.registered[v, k] and poses.interpolated[v, k]
     assert poses.valid.all()
     # interpolated poses stay within the view's motion (a few % of the canonical radius)
-    gt = canonical_of(poses).apply_c2w(scene8["latent"])
     assert np.linalg.norm(poses.c2w[2, 1, :3, 3] - poses.c2w[2, 0, :3, 3]) < 0.1
+    # fallback test cameras: the true sharp-image poses carried into the canonical frame by the similarity that
+    # maps the true latent centres onto the registered ones (fitted here, independently of the stage)
+    reg = poses.registered
+    gt_to_model = umeyama(scene8["latent"][reg][:, :3, 3], poses.c2w[reg][:, :3, 3])
+    expected = gt_to_model.apply_c2w(scene8["sharp_c2w"])
     tc = read_test_cameras(tmp_path / "sfm")
     assert np.all(tc.method == METHOD_FALLBACK) and np.all(np.isnan(tc.reprojection_error_px))
-    assert np.median(np.linalg.norm(tc.c2w[:, :3, 3] - gt[0, 0, :3, 3], axis=1)) > 0  # placed, finite
+    assert np.all(np.isfinite(tc.c2w))
+    assert np.median(np.linalg.norm(tc.c2w[:, :3, 3] - expected[:, :3, 3], axis=1)) < 0.01  # canonical units
 
     strict = SfmConfig(mode="colmap", register_test=False, min_registered_fraction=1.0)
     with pytest.raises(

@@ -103,6 +103,26 @@ def _remedies(mode: str) -> str:
     return "; ".join(tips)
 
 
+@dataclass
+class _Latents:
+    """The latent images given to COLMAP: one per sharp view, B + 1 per other view."""
+
+    slots: list[tuple[int, int]]  # (view, latent index) of each image
+    names: list[str]  # file names, ``latent_png_name(v, k)``
+    view_of_name: dict[str, int]
+    n_views: int
+    per_view: int  # L = B + 1
+
+    @classmethod
+    def of(cls, sharp: np.ndarray, n_views: int, per_view: int) -> _Latents:
+        from eigs.artifacts.edi import latent_png_name
+
+        slots = [(v, k) for v in range(n_views) for k in (range(1) if sharp[v] else range(per_view))]
+        names = [latent_png_name(v, k) for v, k in slots]
+        view_of_name = {n: v for (v, _k), n in zip(slots, names, strict=True)}
+        return cls(slots, names, view_of_name, n_views, per_view)
+
+
 def run_sfm(
     scene_path: str | os.PathLike,
     edi_path: str | os.PathLike,
@@ -111,247 +131,314 @@ def run_sfm(
     latent_dir: str | os.PathLike | None = None,
     cfg: SfmConfig | None = None,
 ) -> dict:
-    """Run the stage and write ``out_dir`` atomically. Returns the report (also in ``report.json``)."""
-    from eigs.artifacts.edi import latent_png_name, read_edi
-    from eigs.scene import io as scene_io
+    """Run the stage and write ``out_dir`` atomically. Returns the report (also in ``report.json``).
+
+    Phases (one function each): read inputs → mode → latent images → features → matching and poses (given:
+    guided matching + fixed-pose triangulation; COLMAP: matching + mapping + sibling check) → registration check
+    → canonical frame → fill unregistered latents → drop single-view points → accuracy → test cameras → write.
+    """
     from eigs.sfm import colmap as cm
     from eigs.util.atomic import atomic_path
 
     cfg = cfg or SfmConfig()
     cm.quiet(cfg.verbose)
     timer = _Timer()
-    scene_path, edi_path = Path(scene_path), Path(edi_path)
-    with timer("read inputs"):
-        scene = scene_io.read_scene(scene_path, events=False)
-        edi = read_edi(edi_path, latent=False)
-    if edi.n_views != scene.n_views:
-        raise EigsError(edi_path, f"EDI has {edi.n_views} views but the scene {scene.n_views} (rerun edi)")
-    cam = scene.camera
-    V, L = edi.n_views, edi.n_bins + 1
-    if V == 0:
-        raise EigsError(scene_path, "the scene has no training views")
+    scene_path, edi_path, out_dir = Path(scene_path), Path(edi_path), Path(out_dir)
+    scene, edi = _read_inputs(scene_path, edi_path, timer)
     mode, reason = resolve_mode(cfg, scene, str(scene_path))
-    log.info("mode: %s (%s); %d views × %d latent frames", mode, reason, V, L)
-    slots = [(v, k) for v in range(V) for k in (range(1) if edi.sharp[v] else range(L))]
-    names = [latent_png_name(v, k) for v, k in slots]
-    view_of_name = {n: v for (v, _k), n in zip(slots, names, strict=True)}
+    lat = _Latents.of(edi.sharp, edi.n_views, edi.n_bins + 1)
+    log.info("mode: %s (%s); %d views × %d latent frames", mode, reason, lat.n_views, lat.per_view)
     report: dict = {
         "scene": scene.name,
         "mode": mode,
         "mode_reason": reason,
-        "views": V,
-        "latent_per_view": L,
+        "views": lat.n_views,
+        "latent_per_view": lat.per_view,
         "sharp_views": [int(v) for v in np.flatnonzero(edi.sharp)],
     }
-
-    out_dir = Path(out_dir)
     with atomic_path(out_dir, directory=True) as tmp:
         work = tmp / "work"
         work.mkdir()
-        # -- images ------------------------------------------------------------------------------
-        ldir = Path(latent_dir) if latent_dir is not None else edi_path.parent / "latent"
-        if not all((ldir / n).is_file() for n in names):
-            log.info("latent PNGs not found in %s: writing them from %s", ldir, edi_path)
-            full = read_edi(edi_path)
-            ldir = work / "latent"
-            ldir.mkdir()
-            for (v, k), n in zip(slots, names, strict=True):
-                _write_png(ldir / n, full.latent[v, k])
-            del full
-        import cv2
-
-        probe = cv2.imread(str(ldir / names[0]), cv2.IMREAD_UNCHANGED)
-        if probe is None or probe.shape[:2] != (cam.height, cam.width):
-            got = "unreadable" if probe is None else f"{probe.shape[1]}×{probe.shape[0]}"
-            raise EigsError(ldir / names[0], f"latent frame is {got}, the camera is {cam.width}×{cam.height}")
+        ldir = _latent_images(latent_dir, edi_path, lat, scene.camera, work)
         db = work / "database.db"
-        opts = cfg.colmap
-        with timer("features"):
-            name_to_id = cm.extract(db, ldir, names, cam.K, cam.width, cam.height, cam.distortion, work, opts)
-        report["feature_scale"] = cm.feature_scale(cam.width, cam.height, opts.feature_scale)
-        px = cm.pixel_scale(opts, cam.width, cam.height)
-        if mode == "colmap":
-            with timer("matching"):
-                report["matcher"] = cm.match(db, len(names), L, opts, px=px)
-
-        # -- poses in the source (model) frame -------------------------------------------------------
-        raw = np.full((V, L, 4, 4), np.nan)
-        registered = np.zeros((V, L), bool)
-        rejected: list[str] = []  # COLMAP mode: latents registered far from their view's other latents
+        name_to_id, px = _features(db, ldir, lat, scene.camera, cfg.colmap, timer, report)
         if mode == "given":
-            got = _given_poses(scene, edi.timestamps_us, scene_path)
-            c2w_by_name = {n: got[v, k] for (v, k), n in zip(slots, names, strict=True)}
-            with timer("matching (epipolar-guided, known poses)"):
-                from eigs.sfm.given import guided_match
-
-                view_of = {name_to_id[n]: v for n, v in view_of_name.items()}
-                report["matcher"] = "epipolar-guided"
-                report["guided_matching"] = guided_match(
-                    db, {name_to_id[n]: c for n, c in c2w_by_name.items()}, view_of, max_epipolar_px=4.0 * px
-                )
-            with timer("triangulation (poses fixed)"):
-                from eigs.sfm.given import triangulate
-
-                rec = triangulate(
-                    db,
-                    ldir,
-                    work / "tri",
-                    name_to_id,
-                    c2w_by_name,
-                    cam.K,
-                    cam.width,
-                    cam.height,
-                    cam.distortion,
-                    num_threads=opts.num_threads,
-                    px=px,
-                )
-            report["models"] = [len(names)]
+            rec, rejected = _given_reconstruction(scene, scene_path, edi, db, ldir, work, lat, name_to_id, px, cfg,
+                                                  timer, report)
         else:
-            with timer("mapping"):
-                res = cm.map_images(db, ldir, work / "map", opts, px=px)
-                if (
-                    res.reconstruction is not None
-                    and report["matcher"] == "sequential"
-                    and res.model_sizes[0] < len(names)
-                ):
-                    res = _spatial_pass(db, ldir, work, res, slots, names, L, opts, px)
-            report["models"] = res.model_sizes
-            if res.reconstruction is None:
-                raise EigsError(
-                    ldir,
-                    f"COLMAP reconstructed nothing from {len(names)} latent frames (too few features or matches). "
-                    f"Remedies: {_remedies(mode)}",
-                )
-            rec = res.reconstruction
-            from eigs.sfm.outliers import reject_sibling_outliers
-
-            with timer("sibling check"):
-                rejected = reject_sibling_outliers(rec, view_of_name, refine_intrinsics=opts.refine_intrinsics)
-            if res.lost_to_other_models:
-                report["models_note"] = (
-                    f"COLMAP split the scene into {len(res.model_sizes)} models; the largest "
-                    f"({res.model_sizes[0]} images) was kept, {res.lost_to_other_models} images registered only "
-                    "in the others"
-                )
-        by_name = {im.name: im for im in rec.images.values() if im.has_pose}
-        for (v, k), n in zip(slots, names, strict=True):
-            if n in by_name:
-                raw[v, k] = cm.c2w_of(by_name[n])
-                registered[v, k] = True
-        for v in np.flatnonzero(edi.sharp):  # one image per sharp view: copy its pose to every slot
-            raw[v, :] = raw[v, 0]
-            registered[v, :] = registered[v, 0]
-        n_reg = sum(n in by_name for n in names)
-        frac = n_reg / len(names)
-        unreg = [n for n in names if n not in by_name]
-        report["registration"] = {
-            "images": len(names),
-            "registered": n_reg,
-            "fraction": frac,
-            "unregistered": unreg,
-            "rejected_far_from_view": rejected,
-        }
-        log.info("registered %d of %d latent frames (%.1f %%)", n_reg, len(names), 100 * frac)
-        if frac < cfg.min_registered_fraction:
-            shown = ", ".join(unreg[:8]) + (" …" if len(unreg) > 8 else "")
-            raise EigsError(
-                out_dir,
-                f"only {n_reg} of {len(names)} latent frames registered ({100 * frac:.0f} % < "
-                f"{100 * cfg.min_registered_fraction:.0f} %); unregistered: {shown}. Remedies: {_remedies(mode)}",
-            )
-
-        # -- canonical frame -------------------------------------------------------------------------
-        from eigs.sfm.canonical import canonical_transform, describe
-
-        canon = canonical_transform(raw[registered][:, :3, 3])
-        rec.transform(cm.sim3d(canon.scale, canon.R, canon.t))
-        c2w = np.where(registered[..., None, None], canon.apply_c2w(np.nan_to_num(raw)), np.nan)
-        report["canonical"] = describe(canon)
-
-        # -- unregistered latents --------------------------------------------------------------------
-        from eigs.sfm.poses import fill_within_views
-
-        interpolated = np.zeros((V, L), bool)
-        if (~registered).any() and cfg.interpolate_unregistered:
-            c2w, interpolated = fill_within_views(c2w, registered, edi.timestamps_us)
-        no_pose = [int(v) for v in range(V) if not np.all(np.isfinite(c2w[v]))]
-        report["registration"]["interpolated"] = [
-            latent_png_name(v, k) for v, k in zip(*np.nonzero(interpolated), strict=True)
-        ]
-        report["registration"]["views_without_all_poses"] = no_pose
-        if interpolated.any():
-            log.warning("%d unregistered latent frames interpolated within their view", int(interpolated.sum()))
-        if no_pose:
-            log.warning("views without a pose for every latent: %s", no_pose)
-        removed = _drop_single_view_points(rec, view_of_name)
-        if removed:
-            log.info("removed %d points seen from one training view only (intra-exposure baseline)", removed)
-        report["points"] = {
-            "removed_single_view": removed,
-            "count": int(rec.num_points3D()),
-            "mean_reprojection_error_px": float(rec.compute_mean_reprojection_error()),
-            "mean_track_length": float(rec.compute_mean_track_length()) if rec.num_points3D() else 0.0,
-        }
-
-        # -- accuracy against ground truth -----------------------------------------------------------
-        from eigs.sfm.given import latent_poses_at
-
-        gt = latent_poses_at(scene, edi.timestamps_us)
-        est_to_gt = None
-        if gt is not None:
-            estimated = registered.copy()
-            estimated[np.asarray(edi.sharp, bool), 1:] = False  # copied slots of sharp views are no estimates
-            estimated &= np.all(np.isfinite(gt[0]), axis=(-2, -1))  # latents with ground truth
-            est_to_gt, report["accuracy"] = _accuracy(c2w, estimated, gt[0], edi.sharp)
-            report["accuracy"]["ground_truth"] = gt[1]
-            a = report["accuracy"]
-            log.info(
-                "accuracy: ATE %.4g (%.3f %% of extent %.4g), rotation error median %.3f°",
-                a["ate_rmse"],
-                a["ate_percent_of_extent"],
-                a["extent"],
-                a["rotation_error_deg_median"],
-            )
-
-        # -- test cameras ----------------------------------------------------------------------------
+            rec, rejected = _colmap_reconstruction(db, ldir, work, lat, px, cfg, timer, report)
+        raw, registered = _registration(rec, lat, edi.sharp, rejected, mode, cfg, out_dir, report)
+        canon, c2w = _canonical_frame(rec, raw, registered, report)
+        c2w, interpolated = _fill_unregistered(c2w, registered, edi.timestamps_us, cfg, report)
+        _drop_points(rec, lat, report)
+        gt, est_to_gt = _ground_truth_accuracy(scene, edi, c2w, registered, report)
         tc = None
         if scene.sharp is not None and len(scene.sharp.t_us):
             with timer("test cameras"):
-                tc, report["test_cameras"] = _test_cameras(scene, rec, db, work, mode, canon, est_to_gt, cfg, opts)
-        # -- write -----------------------------------------------------------------------------------
-        from eigs.artifacts.poses import LatentPoses, write_poses, write_test_cameras
-
-        rec.write(tmp)
-        write_poses(
-            LatentPoses(
-                c2w=c2w,
-                timestamps_us=np.asarray(edi.timestamps_us, np.int64),
-                registered=registered,
-                interpolated=interpolated,
-                sharp=np.asarray(edi.sharp, bool),
-                K=np.asarray(cam.K, np.float64),
-                width=cam.width,
-                height=cam.height,
-                mode=mode,
-                canonical=canon.matrix(),
-            ),
-            tmp / "poses.h5",
-        )
-        if tc is not None:
-            write_test_cameras(tc, tmp / "test_cameras.h5")
-        report["timings_s"] = timer.times
-        if cfg.plot:
-            try:
-                _plot(tmp / "report.png", c2w, registered, gt[0] if gt is not None else None, est_to_gt, report)
-            except Exception as err:  # a plot never fails the stage
-                log.warning("plot failed: %s", err)
-        (tmp / "report.json").write_text(json.dumps(_jsonable(report), indent=2) + "\n")
+                tc, report["test_cameras"] = _test_cameras(
+                    scene, rec, db, work, mode, canon, est_to_gt, cfg, cfg.colmap
+                )
+        _write_outputs(tmp, rec, scene, edi, c2w, registered, interpolated, mode, canon, tc, gt, est_to_gt, cfg,
+                       timer, report)
         if cfg.keep_work:
             log.info("work files kept in %s", out_dir / "work")
         else:
             shutil.rmtree(work, ignore_errors=True)
     log.info("wrote %s", out_dir)
     return report
+
+
+def _read_inputs(scene_path: Path, edi_path: Path, timer: _Timer):
+    """The scene (without events) and the EDI result (without latent frames); checks they agree."""
+    from eigs.artifacts.edi import read_edi
+    from eigs.scene import io as scene_io
+
+    with timer("read inputs"):
+        scene = scene_io.read_scene(scene_path, events=False)
+        edi = read_edi(edi_path, latent=False)
+    if edi.n_views != scene.n_views:
+        raise EigsError(edi_path, f"EDI has {edi.n_views} views but the scene {scene.n_views} (rerun edi)")
+    if edi.n_views == 0:
+        raise EigsError(scene_path, "the scene has no training views")
+    return scene, edi
+
+
+def _latent_images(latent_dir, edi_path: Path, lat: _Latents, cam, work: Path) -> Path:
+    """The directory of latent PNGs: ``latent_dir`` (default: next to the EDI file) when it holds every image,
+    else written from the EDI file into ``work/latent``. Checks the image size against the camera."""
+    import cv2
+
+    from eigs.artifacts.edi import read_edi
+
+    ldir = Path(latent_dir) if latent_dir is not None else edi_path.parent / "latent"
+    if not all((ldir / n).is_file() for n in lat.names):
+        log.info("latent PNGs not found in %s: writing them from %s", ldir, edi_path)
+        full = read_edi(edi_path)
+        ldir = work / "latent"
+        ldir.mkdir()
+        for (v, k), n in zip(lat.slots, lat.names, strict=True):
+            _write_png(ldir / n, full.latent[v, k])
+        del full
+    probe = cv2.imread(str(ldir / lat.names[0]), cv2.IMREAD_UNCHANGED)
+    if probe is None or probe.shape[:2] != (cam.height, cam.width):
+        got = "unreadable" if probe is None else f"{probe.shape[1]}×{probe.shape[0]}"
+        raise EigsError(ldir / lat.names[0], f"latent frame is {got}, the camera is {cam.width}×{cam.height}")
+    return ldir
+
+
+def _features(db: Path, ldir: Path, lat: _Latents, cam, opts: ColmapOptions, timer: _Timer, report: dict):
+    """SIFT features of every latent image into ``db``: (name → COLMAP image id, pixel scale of the thresholds)."""
+    from eigs.sfm import colmap as cm
+
+    with timer("features"):
+        name_to_id = cm.extract(db, ldir, lat.names, cam.K, cam.width, cam.height, cam.distortion, db.parent, opts)
+    report["feature_scale"] = cm.feature_scale(cam.width, cam.height, opts.feature_scale)
+    return name_to_id, cm.pixel_scale(opts, cam.width, cam.height)
+
+
+def _given_reconstruction(scene, scene_path, edi, db, ldir, work, lat, name_to_id, px, cfg, timer, report):
+    """Given mode: matches guided by the known poses, then points triangulated with the poses fixed."""
+    from eigs.sfm.given import guided_match, triangulate
+
+    got = _given_poses(scene, edi.timestamps_us, scene_path)
+    c2w_by_name = {n: got[v, k] for (v, k), n in zip(lat.slots, lat.names, strict=True)}
+    cam = scene.camera
+    with timer("matching (epipolar-guided, known poses)"):
+        view_of = {name_to_id[n]: v for n, v in lat.view_of_name.items()}
+        report["matcher"] = "epipolar-guided"
+        report["guided_matching"] = guided_match(
+            db, {name_to_id[n]: c for n, c in c2w_by_name.items()}, view_of, max_epipolar_px=4.0 * px
+        )
+    with timer("triangulation (poses fixed)"):
+        rec = triangulate(
+            db,
+            ldir,
+            work / "tri",
+            name_to_id,
+            c2w_by_name,
+            cam.K,
+            cam.width,
+            cam.height,
+            cam.distortion,
+            num_threads=cfg.colmap.num_threads,
+            px=px,
+        )
+    report["models"] = [len(lat.names)]
+    return rec, []
+
+
+def _colmap_reconstruction(db, ldir, work, lat, px, cfg, timer, report):
+    """COLMAP mode: matching, incremental (or global) mapping with a spatial second pass after sequential
+    matching, then the rejection of latents registered far from their view's siblings."""
+    from eigs.sfm import colmap as cm
+    from eigs.sfm.outliers import reject_sibling_outliers
+
+    opts = cfg.colmap
+    with timer("matching"):
+        report["matcher"] = cm.match(db, len(lat.names), lat.per_view, opts, px=px)
+    with timer("mapping"):
+        res = cm.map_images(db, ldir, work / "map", opts, px=px)
+        if res.reconstruction is not None and report["matcher"] == "sequential" and res.model_sizes[0] < len(
+            lat.names
+        ):
+            res = _spatial_pass(db, ldir, work, res, lat.slots, lat.names, lat.per_view, opts, px)
+    report["models"] = res.model_sizes
+    if res.reconstruction is None:
+        raise EigsError(
+            ldir,
+            f"COLMAP reconstructed nothing from {len(lat.names)} latent frames (too few features or matches). "
+            f"Remedies: {_remedies('colmap')}",
+        )
+    rec = res.reconstruction
+    with timer("sibling check"):
+        rejected = reject_sibling_outliers(rec, lat.view_of_name, refine_intrinsics=opts.refine_intrinsics)
+    if res.lost_to_other_models:
+        report["models_note"] = (
+            f"COLMAP split the scene into {len(res.model_sizes)} models; the largest "
+            f"({res.model_sizes[0]} images) was kept, {res.lost_to_other_models} images registered only "
+            "in the others"
+        )
+    return rec, rejected
+
+
+def _registration(rec, lat: _Latents, sharp, rejected, mode, cfg, out_dir, report):
+    """((V, L, 4, 4) model-frame c2w, NaN where unregistered; (V, L) registered). Sharp views' one pose is copied
+    to every slot. Raises when fewer than ``min_registered_fraction`` of the images registered."""
+    from eigs.sfm import colmap as cm
+
+    raw = np.full((lat.n_views, lat.per_view, 4, 4), np.nan)
+    registered = np.zeros((lat.n_views, lat.per_view), bool)
+    by_name = {im.name: im for im in rec.images.values() if im.has_pose}
+    for (v, k), n in zip(lat.slots, lat.names, strict=True):
+        if n in by_name:
+            raw[v, k] = cm.c2w_of(by_name[n])
+            registered[v, k] = True
+    for v in np.flatnonzero(sharp):  # one image per sharp view: copy its pose to every slot
+        raw[v, :] = raw[v, 0]
+        registered[v, :] = registered[v, 0]
+    names = lat.names
+    n_reg = sum(n in by_name for n in names)
+    frac = n_reg / len(names)
+    unreg = [n for n in names if n not in by_name]
+    report["registration"] = {
+        "images": len(names),
+        "registered": n_reg,
+        "fraction": frac,
+        "unregistered": unreg,
+        "rejected_far_from_view": rejected,
+    }
+    log.info("registered %d of %d latent frames (%.1f %%)", n_reg, len(names), 100 * frac)
+    if frac < cfg.min_registered_fraction:
+        shown = ", ".join(unreg[:8]) + (" …" if len(unreg) > 8 else "")
+        raise EigsError(
+            out_dir,
+            f"only {n_reg} of {len(names)} latent frames registered ({100 * frac:.0f} % < "
+            f"{100 * cfg.min_registered_fraction:.0f} %); unregistered: {shown}. Remedies: {_remedies(mode)}",
+        )
+    return raw, registered
+
+
+def _canonical_frame(rec, raw, registered, report):
+    """Move the model and the poses into the canonical frame: (transform, (V, L, 4, 4) c2w, NaN unregistered)."""
+    from eigs.sfm import colmap as cm
+    from eigs.sfm.canonical import canonical_transform, describe
+
+    canon = canonical_transform(raw[registered][:, :3, 3])
+    rec.transform(cm.sim3d(canon.scale, canon.R, canon.t))
+    c2w = np.where(registered[..., None, None], canon.apply_c2w(np.nan_to_num(raw)), np.nan)
+    report["canonical"] = describe(canon)
+    return canon, c2w
+
+
+def _fill_unregistered(c2w, registered, timestamps_us, cfg, report):
+    """Interpolate unregistered latents from registered latents of the same view (when enabled):
+    (c2w, (V, L) interpolated)."""
+    from eigs.artifacts.edi import latent_png_name
+    from eigs.sfm.poses import fill_within_views
+
+    interpolated = np.zeros(registered.shape, bool)
+    if (~registered).any() and cfg.interpolate_unregistered:
+        c2w, interpolated = fill_within_views(c2w, registered, timestamps_us)
+    no_pose = [int(v) for v in range(c2w.shape[0]) if not np.all(np.isfinite(c2w[v]))]
+    report["registration"]["interpolated"] = [
+        latent_png_name(v, k) for v, k in zip(*np.nonzero(interpolated), strict=True)
+    ]
+    report["registration"]["views_without_all_poses"] = no_pose
+    if interpolated.any():
+        log.warning("%d unregistered latent frames interpolated within their view", int(interpolated.sum()))
+    if no_pose:
+        log.warning("views without a pose for every latent: %s", no_pose)
+    return c2w, interpolated
+
+
+def _drop_points(rec, lat: _Latents, report: dict) -> None:
+    """Remove points seen from one training view only; record the point statistics."""
+    removed = _drop_single_view_points(rec, lat.view_of_name)
+    if removed:
+        log.info("removed %d points seen from one training view only (intra-exposure baseline)", removed)
+    report["points"] = {
+        "removed_single_view": removed,
+        "count": int(rec.num_points3D()),
+        "mean_reprojection_error_px": float(rec.compute_mean_reprojection_error()),
+        "mean_track_length": float(rec.compute_mean_track_length()) if rec.num_points3D() else 0.0,
+    }
+
+
+def _ground_truth_accuracy(scene, edi, c2w, registered, report):
+    """Accuracy of the estimated latent poses against the scene's ground truth, when it has some:
+    (ground truth (poses, description) or None, Sim(3) canonical estimate → ground truth or None)."""
+    from eigs.sfm.given import latent_poses_at
+
+    gt = latent_poses_at(scene, edi.timestamps_us)
+    if gt is None:
+        return None, None
+    estimated = registered.copy()
+    estimated[np.asarray(edi.sharp, bool), 1:] = False  # copied slots of sharp views are no estimates
+    estimated &= np.all(np.isfinite(gt[0]), axis=(-2, -1))  # latents with ground truth
+    est_to_gt, report["accuracy"] = _accuracy(c2w, estimated, gt[0], edi.sharp)
+    report["accuracy"]["ground_truth"] = gt[1]
+    a = report["accuracy"]
+    log.info(
+        "accuracy: ATE %.4g (%.3f %% of extent %.4g), rotation error median %.3f°",
+        a["ate_rmse"],
+        a["ate_percent_of_extent"],
+        a["extent"],
+        a["rotation_error_deg_median"],
+    )
+    return gt, est_to_gt
+
+
+def _write_outputs(tmp, rec, scene, edi, c2w, registered, interpolated, mode, canon, tc, gt, est_to_gt, cfg, timer,
+                   report) -> None:
+    """The COLMAP model, ``poses.h5``, ``test_cameras.h5``, ``report.png`` and ``report.json`` into ``tmp``."""
+    from eigs.artifacts.poses import LatentPoses, write_poses, write_test_cameras
+
+    cam = scene.camera
+    rec.write(tmp)
+    write_poses(
+        LatentPoses(
+            c2w=c2w,
+            timestamps_us=np.asarray(edi.timestamps_us, np.int64),
+            registered=registered,
+            interpolated=interpolated,
+            sharp=np.asarray(edi.sharp, bool),
+            K=np.asarray(cam.K, np.float64),
+            width=cam.width,
+            height=cam.height,
+            mode=mode,
+            canonical=canon.matrix(),
+        ),
+        tmp / "poses.h5",
+    )
+    if tc is not None:
+        write_test_cameras(tc, tmp / "test_cameras.h5")
+    report["timings_s"] = timer.times
+    if cfg.plot:
+        try:
+            _plot(tmp / "report.png", c2w, registered, gt[0] if gt is not None else None, est_to_gt, report)
+        except Exception as err:  # a plot never fails the stage
+            log.warning("plot failed: %s", err)
+    (tmp / "report.json").write_text(json.dumps(_jsonable(report), indent=2) + "\n")
 
 
 def _drop_single_view_points(rec, view_of_name: dict[str, int]) -> int:
