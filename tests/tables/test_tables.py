@@ -1,0 +1,186 @@
+"""eigs tables from hand-made metrics.json files with known answers: means over scenes, best / second best, the
+oracle row excluded from the ranking, distances to the oracle, the paper's values, CSV / Markdown / LaTeX agreeing."""
+
+from __future__ import annotations
+
+import csv
+import json
+import re
+
+import pytest
+
+from eigs.cli import main
+from eigs.tables.build import build_tables, rank
+from eigs.tables.collect import brace_pattern, summarise
+from eigs.tables.figures import pareto_front
+from eigs.tables.paper import TABLES
+from eigs.tables.write import fmt_time, to_csv, to_latex, to_markdown
+
+SCENES = ("alpha", "beta")
+# run -> (method, per-scene novel PSNR, SSIM, LPIPS, train seconds)
+RUNS = {
+    "3dgs": ("3dgs", (20.0, 21.0), (0.80, 0.82), (0.30, 0.32), 10.0),
+    "e2gs": ("e2gs", (24.0, 25.0), (0.90, 0.90), (0.20, 0.22), 200.0),
+    "eigs": ("eigs", (26.0, 27.0), (0.90, 0.90), (0.10, 0.12), 300.0),
+    "oracle": ("oracle", (30.0, 31.0), (0.95, 0.97), (0.05, 0.05), 40.0),
+}
+MAPPING = {
+    "table1": {"3dgs": "3dgs", "e2gs": "e2gs", "eigs": "eigs", "bad-gaussians": None, "oracle": "oracle"},
+    "table2": {"3dgs": "3dgs", "ours": "eigs", "oracle": "oracle"},
+    "table3": {"4": "eigs", "6": None, "8": None, "oracle": "oracle"},
+}
+
+
+def write_metrics(root, run, scene, method, psnr, ssim, lpips, seconds, gt=True, brisque=None):
+    d = root / scene / "b4" / "eval" / run
+    d.mkdir(parents=True)
+    metrics = ({"novel": {"n": 2, "psnr": psnr, "ssim_3dgs": ssim, "ssim_skimage-gaussian": ssim - 0.01,
+                          "ssim_deblurnerf": ssim - 0.02, "lpips_alex": lpips},
+                "blur": {"n": 2, "psnr": psnr + 1, "ssim_3dgs": ssim, "ssim_skimage-gaussian": ssim,
+                         "ssim_deblurnerf": ssim, "lpips_alex": lpips}}
+               if gt else {"all": {"n": 9, "brisque": brisque, "brisque_undefined": 0}})  # fmt: skip
+    doc = {"format": "eigs-metrics", "version": 1, "run": run, "method": method, "scene": scene, "bins": 4,
+           "run_dir": f"results/{scene}/b4/{run}", "ground_truth": gt, "metrics": metrics,
+           "train_seconds": seconds, "steps": 100, "n_gaussians": 1000, "fps": 50.0}  # fmt: skip
+    (d / "metrics.json").write_text(json.dumps(doc))
+    return d / "metrics.json"
+
+
+@pytest.fixture()
+def metrics_files(tmp_path):
+    files = []
+    for run, (method, psnr, ssim, lpips, secs) in RUNS.items():
+        for i, scene in enumerate(SCENES):
+            files.append(write_metrics(tmp_path, run, scene, method, psnr[i], ssim[i], lpips[i], secs))
+    # one real scene (no ground truth) for two runs: BRISQUE
+    files.append(write_metrics(tmp_path, "3dgs", "real", "3dgs", None, None, None, 10.0, gt=False, brisque=40.0))
+    files.append(write_metrics(tmp_path, "eigs", "real", "eigs", None, None, None, 300.0, gt=False, brisque=30.0))
+    return files
+
+
+@pytest.fixture()
+def tables(metrics_files):
+    return {t.name: t for t in build_tables(MAPPING, summarise(metrics_files))}
+
+
+def row(table, key):
+    return next(r for r in table.rows if r.key == key)
+
+
+def test_means_over_scenes_and_brisque_only_from_scenes_without_ground_truth(tables):
+    t1 = tables["table1"]
+    eigs = row(t1, "eigs")
+    assert eigs.cells["psnr"].ours == pytest.approx(26.5)
+    assert eigs.cells["lpips"].ours == pytest.approx(0.11)
+    assert eigs.cells["psnr_blur"].ours == pytest.approx(27.5)
+    assert eigs.cells["brisque"].ours == pytest.approx(30.0)
+    assert row(t1, "e2gs").cells["brisque"].ours is None  # no real scene: no BRISQUE
+    assert eigs.cells["time_s"].ours == pytest.approx(300.0) and eigs.n_scenes == 3
+    assert eigs.source == "results/{alpha,beta,real}/b4/eigs"
+
+
+def test_best_and_second_best_exclude_the_oracle(tables):
+    t1 = tables["table1"]
+    assert row(t1, "eigs").cells["psnr"].rank == 1
+    assert row(t1, "e2gs").cells["psnr"].rank == 2
+    assert row(t1, "3dgs").cells["psnr"].rank is None
+    assert row(t1, "oracle").role == "oracle" and row(t1, "oracle").cells["psnr"].rank is None
+    # LPIPS: lower is better
+    assert row(t1, "eigs").cells["lpips"].rank == 1 and row(t1, "e2gs").cells["lpips"].rank == 2
+    # equal SSIM as displayed (0.9000): eigs and e2gs share the best rank, 3dgs is second
+    assert row(t1, "eigs").cells["ssim"].rank == 1 and row(t1, "e2gs").cells["ssim"].rank == 1
+    assert row(t1, "3dgs").cells["ssim"].rank == 2
+    # BRISQUE: eigs 30 best, 3dgs 40 second
+    assert row(t1, "eigs").cells["brisque"].rank == 1 and row(t1, "3dgs").cells["brisque"].rank == 2
+
+
+def test_distance_to_oracle(tables):
+    t1 = tables["table1"]
+    assert row(t1, "eigs").d_oracle["psnr"] == pytest.approx(26.5 - 30.5)
+    assert row(t1, "3dgs").d_oracle["lpips"] == pytest.approx(0.31 - 0.05)
+    assert row(t1, "oracle").d_oracle["psnr"] == pytest.approx(0.0)
+
+
+def test_paper_values_and_paper_only_rows(tables):
+    t1, t3 = tables["table1"], tables["table3"]
+    assert row(t1, "eigs").cells["psnr"].paper == 28.21
+    assert row(t1, "e2nerf").cells["psnr"].paper == 29.56 and row(t1, "e2nerf").run is None
+    # the paper's own ranking: E²NeRF best (29.56), Ours second (28.21); BRISQUE Ours best (26.08)
+    assert row(t1, "e2nerf").cells["psnr"].paper_rank == 1 and row(t1, "eigs").cells["psnr"].paper_rank == 2
+    assert row(t1, "eigs").cells["brisque"].paper_rank == 1
+    assert row(t1, "deblurring-gs").cells["brisque"].paper_rank == 2
+    r8 = row(t3, "8")
+    assert r8.cells["psnr"].ours is None and r8.cells["psnr"].paper == 28.93
+    assert r8.cells["time_s"].paper == 5 * 3600 + 49 * 60
+    # every paper row is in its table, in the paper's order
+    assert [r.key for r in t1.rows][: len(TABLES["table1"]["rows"])] == list(TABLES["table1"]["rows"])
+    assert row(tables["table2"], "a").config == "+-+-"
+
+
+def _strip_marks(s: str) -> str:
+    return re.sub(r"\\(best|second)\{([^}]*)\}", r"\2", s.replace("**", "").replace("<u>", "").replace("</u>", ""))
+
+
+def test_csv_markdown_and_latex_agree(tables):
+    for t in tables.values():
+        rows = list(csv.DictReader(to_csv(t).splitlines()))
+        md = [line for line in to_markdown(t).splitlines() if line.startswith("| ") and "---" not in line][1:]
+        tex = [line for line in to_latex(t).splitlines() if line.endswith("\\\\")][1:]
+        assert len(rows) == len(md) == len(tex) == len(t.rows)
+        shown = [c for c in t.columns if c.shown]
+        first = 1 + (4 if t.name == "table2" else 0)
+        for r, m, x in zip(rows, md, tex, strict=True):
+            mcells = [c.strip() for c in m.strip("|").split(" | ")]
+            xcells = [c.strip() for c in x.removesuffix("\\\\").split(" & ")]
+            for j, col in enumerate(shown):
+                ours, paper = r[col.key], r[f"{col.key}_paper"]
+                plain = _strip_marks(mcells[first + j])
+                want_ours = "–" if ours == "" else (f"{float(ours):.{col.decimals}f}" if col.decimals else None)
+                if want_ours is not None:
+                    assert plain.split(" (")[0] == want_ours, (t.name, r["row"], col.key, plain)
+                if paper != "" and col.decimals:
+                    d = col.paper_decimals if col.paper_decimals is not None else col.decimals
+                    assert plain.split(" (")[1].rstrip(")") == f"{float(paper):.{d}f}"
+                assert _strip_marks(xcells[first + j]).replace("--", "–") == plain
+                # marks: bold / \best for rank 1, underline / \second for rank 2
+                if r[f"{col.key}_rank"] == "1":
+                    assert mcells[first + j].startswith("**") and xcells[first + j].startswith("\\best{")
+                elif r[f"{col.key}_rank"] == "2":
+                    assert mcells[first + j].startswith("<u>") and xcells[first + j].startswith("\\second{")
+                else:
+                    assert not mcells[first + j].startswith(("**", "<u>"))
+            assert mcells[-1] == (r["source"] or "–")
+
+
+def test_cli_writes_every_format(metrics_files, tmp_path):
+    out = tmp_path / "tables"
+    code = main(["tables", *map(str, metrics_files), "--tables", json.dumps(MAPPING), "-o", str(out)])
+    assert code == 0
+    for name in MAPPING:
+        for ext in ("csv", "md", "tex"):
+            assert (out / f"{name}.{ext}").stat().st_size > 0
+    assert "Table I" in (out / "tables.md").read_text()
+    per = list(csv.DictReader((out / "per_scene.csv").open()))
+    assert len(per) == len(metrics_files)
+    assert main(["tables", str(metrics_files[0]), "--tables", '{"table9": {}}', "-o", str(out)]) == 2
+
+
+def test_helpers():
+    assert fmt_time(3 * 3600 + 25 * 60) == "3h25m" and fmt_time(307) == "5m07s" and fmt_time(12.34) == "12.3s"
+    assert brace_pattern(["results/a/b4/x", "results/b/b4/x"]) == "results/{a,b}/b4/x"
+    assert brace_pattern(["results/a/b4/x", "results/b/b6/y"]) == "results/a/b4/x;results/b/b6/y"
+    assert rank({0: 1.0, 1: 3.0, 2: 2.0, 3: None}, "higher") == {1: 1, 2: 2}
+    assert rank({0: 1.0, 1: 3.0, 2: 2.0}, "lower") == {0: 1, 2: 2}
+    # Pareto front over (seconds, PSNR): (1, 20) and (10, 25) and (100, 26); (50, 24) is dominated by (10, 25)
+    assert pareto_front([(1, 20), (10, 25), (50, 24), (100, 26)]) == [0, 1, 3]
+
+
+def test_paper_transcription_spot_checks():
+    """A few cells against the paper's text (§IV-C): Table II gains and Table III times."""
+    t2 = TABLES["table2"]["rows"]
+    assert t2["a"]["psnr"] - t2["3dgs"]["psnr"] == pytest.approx(3.83)
+    assert t2["b"]["psnr"] - t2["a"]["psnr"] == pytest.approx(1.40)
+    assert t2["ours-minus"]["psnr"] - t2["a"]["psnr"] == pytest.approx(0.42)
+    assert t2["ours"]["psnr"] - t2["b"]["psnr"] == pytest.approx(2.71)
+    assert t2["ours"]["psnr"] - t2["ours-minus"]["psnr"] == pytest.approx(3.69)
+    assert TABLES["table3"]["rows"]["8"]["psnr"] - TABLES["table3"]["rows"]["6"]["psnr"] == pytest.approx(0.12)
