@@ -384,6 +384,9 @@ def _drop_points(rec, lat: _Latents, report: dict) -> None:
     }
 
 
+MIN_MATCHED = 3  # latents with ground truth needed for the Sim(3) alignment
+
+
 def _ground_truth_accuracy(scene, edi, c2w, registered, report):
     """Accuracy of the estimated latent poses against the scene's ground truth, when it has some:
     (ground truth (poses, description) or None, Sim(3) canonical estimate → ground truth or None)."""
@@ -395,6 +398,17 @@ def _ground_truth_accuracy(scene, edi, c2w, registered, report):
     estimated = registered.copy()
     estimated[np.asarray(edi.sharp, bool), 1:] = False  # copied slots of sharp views are no estimates
     estimated &= np.all(np.isfinite(gt[0]), axis=(-2, -1))  # latents with ground truth
+    n_matched = int(np.count_nonzero(estimated))
+    if n_matched < MIN_MATCHED:
+        what = "no registered latent pose has" if n_matched == 0 else f"only {n_matched} registered latent poses have"
+        note = (
+            f"{what} ground truth at its time ({MIN_MATCHED} needed for a Sim(3)): the latent times (EDI "
+            "timestamps_us, from the frames' exposure windows or timestamps) lie outside the ground truth, or the "
+            "frames have no times"
+        )
+        log.warning("accuracy not computed: %s", note)
+        report["accuracy"] = {"n": n_matched, "ate_rmse": None, "note": note, "ground_truth": gt[1]}
+        return None, None
     est_to_gt, report["accuracy"] = _accuracy(c2w, estimated, gt[0], edi.sharp)
     report["accuracy"]["ground_truth"] = gt[1]
     a = report["accuracy"]
