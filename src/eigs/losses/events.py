@@ -102,3 +102,20 @@ def e2nerf_event_loss(
     if not terms:
         return logs.sum() * 0.0
     return torch.stack(terms).mean()
+
+
+def normalized_event_loss(log_a: Tensor, log_b: Tensor, counts: Tensor, mask: Tensor | None = None) -> Tensor:
+    """BeSplat's / BeNeRF's threshold-free event loss: the predicted log difference and the event count of the
+    same interval, each L2-normalised over the pixels, compared by the squared distance ‖Δ/‖Δ‖ − E/‖E‖‖² (summed
+    over pixels: 2 − 2·cos of the angle between them, in [0, 4]). Zero when Δ = c·E for any c > 0.
+
+    ``log_a``, ``log_b``: (H, W) log intensities; ``counts``: (H, W) net signed counts; ``mask``: (H, W) bool, True
+    where events were ignored. Norms are guarded (≥ 1e-8), so an interval without events or change is finite."""
+    diff = log_b - log_a
+    e = counts.to(diff.dtype)
+    if mask is not None:
+        keep = (~mask).to(diff.dtype)
+        diff, e = diff * keep, e * keep
+    d_hat = diff / diff.norm().clamp_min(1e-8)
+    e_hat = e / e.norm().clamp_min(1e-8)
+    return (d_hat - e_hat).pow(2).sum()

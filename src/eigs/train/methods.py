@@ -82,6 +82,7 @@ def register(cls: type[Method]) -> type[Method]:
 
 def _load_all() -> None:
     """Import the modules that register methods beyond this one's."""
+    import eigs.train.camera_motion  # noqa: F401
     import eigs.train.deblur  # noqa: F401
 
 

@@ -1,0 +1,190 @@
+"""Methods that explain a blurry frame by a learned camera trajectory within its exposure: BAD-Gaussians, BeSplat
+and our reading of EvaGaussians (``docs/methods.md``).
+
+One step on view v: the view's trajectory ``P(u) = P_ref · exp(ξ(u))`` (:mod:`eigs.train.trajectory`) is sampled at
+``n_virtual`` evenly spaced times u_j = j / (n_virtual − 1); each virtual camera is rendered as the reference camera
+looking at the Gaussians moved by ``P_ref · exp(−ξ(u_j)) · P_ref⁻¹`` (exact for a rigid motion, and differentiable
+in ξ, which the rasterizer is not in the camera); the renders are averaged in linear intensity and compared with
+the blurry frame (L1 + D-SSIM). Event losses compare renders at the latent times k / N, which are virtual views
+when ``n_virtual − 1`` is a multiple of N.
+
+Reference and start: ``P_ref`` is the view's latent pose k = 0 (as every method's). With ``init: latent`` the
+control twists start at the least-squares fit to the relative latent poses ``P_0⁻¹ P_k`` from SfM (the paper's
+protocol gives every method the EDI + COLMAP poses); with ``init: reference`` they start at zero plus N(0, 1e-5)
+noise, as BAD-Gaussians starts from one COLMAP pose per image.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from eigs.errors import EigsError
+from eigs.losses import photometric_loss
+from eigs.losses.events import (
+    event_integration_loss,
+    from_linear,
+    log_intensity,
+    normalized_event_loss,
+    to_linear,
+)
+from eigs.train.config import TrainConfig
+from eigs.train.data import TrainData
+from eigs.train.methods import Method, StepOutput, register
+from eigs.train.model import GaussianModel
+from eigs.train.rigid import transform_gaussians
+from eigs.train.trajectory import MODES, curve_weights, fit_controls, se3_exp, se3_log
+
+TRAJECTORY_OPTIONS: dict[str, Any] = {
+    "mode": "linear",  # trajectory curve: linear, cubic (B-spline) or bezier
+    "n_control": 2,  # control twists of the curve (linear 2, cubic 4, Bézier ≥ 2)
+    "n_virtual": 10,  # virtual cameras rendered per step (BAD-Gaussians: 10)
+    "init": "latent",  # "latent" (fit to the SfM latent poses) or "reference" (zero motion + 1e-5 noise)
+    "lr_pose": 1e-3,  # Adam learning rate of the control twists (rad and scene units per step)
+    "event_loss": "none",  # "none", "eigs" (Eq. 9–10, L1 of the integral) or "normalized" (BeSplat)
+    "lambda_event": 0.0,
+    "lambda_blur": 1.0,
+}
+
+
+class TrajectoryMethod(Method):
+    """A per-view camera trajectory, ``n_virtual`` renders per step. Subclasses set ``RECIPE``."""
+
+    RECIPE: ClassVar[dict[str, Any]] = {}
+    OPTIONS = TRAJECTORY_OPTIONS
+
+    def __init_subclass__(cls, **kw: Any) -> None:
+        super().__init_subclass__(**kw)
+        cls.OPTIONS = {**TRAJECTORY_OPTIONS, **cls.RECIPE}
+
+    def __init__(self, data: TrainData, cfg: TrainConfig, device: torch.device):
+        super().__init__(data, cfg, device)
+        o = self.options
+        where = f"method {self.name}"
+        mode, k_ctrl, n_virt = str(o["mode"]), int(o["n_control"]), int(o["n_virtual"])
+        if mode not in MODES:
+            raise EigsError(where, f"mode must be one of {', '.join(MODES)}, got {mode!r}")
+        try:
+            curve_weights(mode, k_ctrl, torch.zeros(1))
+        except ValueError as err:
+            raise EigsError(where, str(err)) from None
+        if n_virt < 2 or o["init"] not in ("latent", "reference"):
+            raise EigsError(where, "n_virtual must be >= 2 and init latent or reference")
+        if o["event_loss"] not in ("none", "eigs", "normalized"):
+            raise EigsError(where, f"event_loss must be none, eigs or normalized, got {o['event_loss']!r}")
+        self.n_bins = data.n_latent - 1
+        if o["event_loss"] != "none" and (n_virt - 1) % self.n_bins != 0:
+            raise EigsError(where, f"event losses need n_virtual - 1 to be a multiple of the EDI bins {self.n_bins}")
+        self.views = data.reference_views()
+        if self.views.size == 0:
+            raise EigsError(data.scene.name, f"method {self.name}: no view has a valid reference pose")
+        self.mode, self.n_virtual = mode, n_virt
+        u = torch.linspace(0.0, 1.0, n_virt, dtype=torch.float64)
+        self.weights = curve_weights(mode, k_ctrl, u).float().to(device)  # (n_virtual, K)
+        self.ref = data.c2w[:, 0].clone()  # (V, 4, 4) float64; NaN rows of invalid views are never used
+        self.ref_f = self.ref.float().to(device)
+        self.ref_inv_f = torch.linalg.inv(torch.nan_to_num(self.ref)).float().to(device)
+        controls = torch.zeros(data.n_views, k_ctrl, 6, dtype=torch.float64)
+        if o["init"] == "latent":
+            t_lat = torch.linspace(0.0, 1.0, data.n_latent, dtype=torch.float64)
+            for v in self.views:
+                ok = torch.from_numpy(data.valid[v])
+                rel = torch.linalg.inv(self.ref[v]) @ data.c2w[v, ok]  # (M, 4, 4) camera-frame deltas P_0⁻¹ P_k
+                controls[v] = fit_controls(mode, k_ctrl, t_lat[ok], se3_log(rel))
+        else:
+            gen = torch.Generator().manual_seed(cfg.seed)
+            controls += 1e-5 * torch.randn(controls.shape, generator=gen, dtype=torch.float64)
+        self.controls = controls.float().to(device).requires_grad_(True)  # (V, K, 6)
+        self.blurry = data.blurry.to(device)
+        self.response = data.camera_response
+        edi = data.edi
+        self.edi_mode = edi.mode
+        self.counts = torch.from_numpy(edi.cum_counts).to(device)
+        self.event_mask = torch.from_numpy(edi.event_mask).to(device) if edi.event_mask is not None else None
+        if edi.threshold_pos_map is not None and edi.threshold_neg_map is not None:
+            self.c_maps: tuple[Tensor, Tensor] | None = (
+                torch.from_numpy(edi.threshold_pos_map).float().to(device),
+                torch.from_numpy(edi.threshold_neg_map).float().to(device),
+            )
+        else:
+            self.c_maps = None
+        self.threshold = np.asarray(edi.threshold, np.float64)
+
+    # ------------------------------------------------------------------ registry hooks
+    def n_samples(self) -> int:
+        return int(self.views.size)
+
+    def param_groups(self) -> list[dict]:
+        return [{"params": [self.controls], "lr": float(self.options["lr_pose"]), "name": "trajectory"}]
+
+    def state_dict(self) -> dict:
+        return {"controls": self.controls.detach().cpu().clone()}
+
+    def load_state_dict(self, state: dict) -> None:
+        with torch.no_grad():  # in place: the optimiser holds this tensor
+            self.controls.copy_(state["controls"].to(self.controls.device))
+
+    # ------------------------------------------------------------------ one step
+    def gaussian_motions(self, v: int) -> Tensor:
+        """(n_virtual, 4, 4) rigid motions of the Gaussians that render view v's virtual cameras from P_ref."""
+        xi = self.weights @ self.controls[v]  # (n_virtual, 6)
+        return self.ref_f[v] @ se3_exp(-xi) @ self.ref_inv_f[v]
+
+    def step(self, model: GaussianModel, sample: int, step: int, sh_degree: int) -> StepOutput:
+        d, o = self.data, self.options
+        v = int(self.views[sample])
+        p = model.params
+        images, infos = [], []
+        for g in self.gaussian_motions(v):
+            means, quats = transform_gaussians(p["means"], p["quats"], g)
+            img, _, info = model.render(self.ref[v], self.K, d.width, d.height, self.background, sh_degree,
+                                        means=means, quats=quats)  # fmt: skip
+            info["means2d"].retain_grad()
+            images.append(img)
+            infos.append(info)
+        stack = torch.stack(images)  # (n_virtual, H, W, C)
+        blur = from_linear(to_linear(stack, self.response).mean(dim=0), self.response)
+        loss, l1, dssim = photometric_loss(blur, self.blurry[v], self.cfg.lambda_dssim)
+        loss = float(o["lambda_blur"]) * loss
+        terms = {"l1": l1.item(), "dssim": dssim.item()}
+        if o["event_loss"] != "none":
+            stride = (self.n_virtual - 1) // self.n_bins
+            logs = log_intensity(stack[::stride], self.response, self.edi_mode)  # (L, H, W) at the latent times
+            counts = self.counts[v]
+            terms_ev = []
+            for k in range(self.n_bins):
+                e = counts[k + 1] - counts[k]
+                if o["event_loss"] == "eigs":
+                    c_pos, c_neg = self.c_maps if self.c_maps is not None else (self.threshold[v],) * 2
+                    terms_ev.append(event_integration_loss(logs[k], logs[k + 1], e, c_pos, c_neg, self.event_mask))
+                else:
+                    terms_ev.append(normalized_event_loss(logs[k], logs[k + 1], e, self.event_mask))
+            ev = torch.stack(terms_ev).mean()
+            loss = loss + float(o["lambda_event"]) * ev
+            terms["event"] = ev.item()
+        return StepOutput(loss, terms, infos)
+
+
+@register
+class BADGaussians(TrajectoryMethod):
+    name = "bad-gaussians"
+    description = "BAD-Gaussians: a per-view linear SE(3) trajectory, 10 virtual cameras, RGB blur loss only"
+    RECIPE = {}
+
+
+@register
+class BeSplat(TrajectoryMethod):
+    name = "besplat"
+    description = "BeSplat: a per-view Bézier trajectory, many virtual cameras, L2-normalised log-difference event loss"
+    # BeSplat uses 19 virtual views and a degree-7 Bézier; 17 = 4·4 + 1 puts the N = 4 latent times on virtual views
+    RECIPE = {"mode": "bezier", "n_control": 4, "n_virtual": 17, "event_loss": "normalized", "lambda_event": 2.0}
+
+
+@register
+class EvaGaussians(TrajectoryMethod):
+    name = "evagaussians"
+    description = "EvaGaussians (our reading, no public code): cubic B-spline trajectory, blur + event integral losses"
+    RECIPE = {"mode": "cubic", "n_control": 4, "n_virtual": 9, "event_loss": "eigs", "lambda_event": 0.1}
