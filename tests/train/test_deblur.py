@@ -131,3 +131,40 @@ def test_option_errors(data):
     with pytest.raises(EigsError, match="unknown option"):
         _method(data, "eigs", widht=3)
     assert np.isfinite(_method(data, "eigs-minus").method.step(_method(data, "eigs-minus").model, 0, 0, 0).loss.item())
+
+
+def test_discrete_blur_target_follows_the_latent_average(data):
+    """With latents lin(L_k) = a_k · lin(B), the discrete target is mean(a_k) · lin(B) (inside the kept ratio band)
+    and the blurry frame itself outside it; latents equal to the frame give the frame back."""
+    import dataclasses
+
+    from eigs.losses.events import from_linear, to_linear
+
+    resp = data.camera_response
+    lin_b = to_linear(data.blurry, resp)
+    a = torch.tensor([0.9, 1.0, 1.1, 1.3, 1.7])[: data.n_latent]
+    lat = from_linear(lin_b[:, None] * a.reshape(1, -1, 1, 1, 1), resp)
+    d2 = dataclasses.replace(data, latent=lat)
+    target = _method(d2, "eigs", blur_target="discrete").method.blurry
+    expect_lin = lin_b * a.mean()
+    band = (lin_b > 0.02) & (expect_lin < 1.0)  # no clipping of the scaled latents
+    assert band.float().mean() > 0.5
+    torch.testing.assert_close(to_linear(target, resp)[band], expect_lin[band], atol=2e-5, rtol=1e-4)
+    same = _method(dataclasses.replace(data, latent=data.blurry[:, None].expand_as(data.latent)), "eigs",
+                   blur_target="discrete").method.blurry  # fmt: skip
+    torch.testing.assert_close(same, data.blurry, atol=2e-6, rtol=0)
+    # a ratio outside [2/3, 3/2] keeps the blurry frame
+    far = from_linear((lin_b * 2.0)[:, None].expand_as(data.latent), resp)
+    kept = _method(dataclasses.replace(data, latent=far), "eigs", blur_target="discrete").method.blurry
+    dark_or_far = lin_b > 0.02
+    torch.testing.assert_close(kept[dark_or_far], data.blurry[dark_or_far], atol=0, rtol=0)
+    with pytest.raises(EigsError, match="blur_target"):
+        _method(data, "eigs", blur_target="discrete", subframes=2)
+
+
+def test_zero_last_layer_starts_without_displacement(data):
+    m = _method(data, "eigs", ade_zero_last=True).method
+    x = torch.randn(30, 3)
+    out = m.ade(x, m.pose_inputs[int(m.views[0])])
+    assert out.abs().max().item() == 0.0
+    assert m.ade.first_x.weight.abs().max().item() > 0  # only the last layer is zero

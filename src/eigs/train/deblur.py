@@ -54,6 +54,11 @@ COMMON_OPTIONS: dict[str, Any] = {
     "pose_prior": False,  # beyond the paper: ADE predicts the residual to the displacement the latent poses imply
     "subframes": 1,  # beyond the paper: renders per latent interval (> 1 adds interpolated displacements)
     "blur_weights": "uniform",  # "uniform" (Eq. 2) or "trapezoid" (the exposure integral by the trapezoid rule)
+    # beyond the paper: "blurry" (Eq. 8) or "discrete" (the blurry frame corrected for the N+1-sample average by the
+    # events: the average of EDI's latent frames with the same weights, which equals the continuous exposure
+    # average of the frame; docs/methods.md)
+    "blur_target": "blurry",
+    "ade_zero_last": False,  # beyond the paper: the ADE's last layer starts at zero (no displacement at step 0)
 }
 
 
@@ -86,6 +91,12 @@ class MultiRender(Method):
             raise EigsError(f"method {self.name}", "consistency, shape, pose_prior, subframes need the ADE (ade: true)")
         if int(o["subframes"]) < 1 or o["blur_weights"] not in ("uniform", "trapezoid"):
             raise EigsError(f"method {self.name}", "subframes must be >= 1 and blur_weights uniform or trapezoid")
+        if o["blur_target"] not in ("blurry", "discrete") or (
+            o["blur_target"] == "discrete" and int(o["subframes"]) != 1
+        ):
+            raise EigsError(
+                f"method {self.name}", "blur_target must be blurry or discrete (discrete needs subframes 1)"
+            )
         self.views = data.reference_views()
         if self.views.size == 0:
             raise EigsError(data.scene.name, f"method {self.name}: no view has a valid reference pose")
@@ -95,8 +106,8 @@ class MultiRender(Method):
         bad = torch.from_numpy(~data.valid)
         c2w[bad] = c2w[:, :1].expand_as(c2w)[bad]
         self.c2w = c2w  # (V, L, 4, 4) float64
-        self.blurry = data.blurry.to(device)
         self.response = data.camera_response
+        self.blurry = (data.blurry if o["blur_target"] == "blurry" else self.discrete_targets()).to(device)
         edi = data.edi
         self.edi_mode = edi.mode
         self.counts = torch.from_numpy(edi.cum_counts).to(device)  # (V, L, H, W) int32
@@ -120,9 +131,25 @@ class MultiRender(Method):
                 pose_freqs=int(o["pose_freqs"]),
                 out_per_latent=10 if o["shape"] else 3,
             ).to(device)
+            if o["ade_zero_last"]:
+                with torch.no_grad():
+                    self.ade.last.weight.zero_()
             self.pose_inputs = torch.stack([self.ade.encode_poses(self.c2w[v]) for v in range(data.n_views)]).to(device)
             # P_0 · P_k⁻¹ moves the Gaussians the way the camera moved from P_0 to P_k (for the pose prior)
             self.relative = (self.c2w[:, :1] @ rigid_inverse(self.c2w[:, 1:])).float().to(device)  # (V, N, 4, 4)
+
+    def discrete_targets(self) -> Tensor:
+        """(V, H, W, C) blur targets for the N+1-sample average: the EDI latent frames averaged in linear intensity
+        with the blur weights. EDI's latents average to the blurry frame over the continuous exposure, so this is
+        the blurry frame times the per-pixel ratio of the discrete to the continuous exposure average that the events
+        imply. Where that ratio leaves [2/3, 3/2] (dark or clipped pixels) the blurry frame is kept."""
+        d = self.data
+        w = self.blur_weights(d.n_latent).reshape(1, -1, 1, 1, 1)
+        disc = (to_linear(d.latent, self.response) * w).sum(dim=1)  # (V, H, W, C)
+        blur = to_linear(d.blurry, self.response)
+        ratio = disc / blur.clamp_min(1e-6)
+        keep = (blur > 0.02) & (ratio > 2 / 3) & (ratio < 1.5)
+        return torch.where(keep, from_linear(disc, self.response), d.blurry).clamp(0.0, 1.0)
 
     # ------------------------------------------------------------------ registry hooks
     def n_samples(self) -> int:
