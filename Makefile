@@ -6,7 +6,7 @@ CORES  ?= 2
 CONFIG ?= config/config.yaml
 PYTEST_WORKERS ?= 2
 
-.PHONY: venv reproduce toy test lint bench clean-results
+.PHONY: venv reproduce toy test test-cluster lint bench clean-results
 
 # Bootstrap .venv with pinned dependencies. torch is installed first and pinned (2.13.0 CPU on our machines):
 # an unpinned torch pulls a multi-GB CUDA build. The package is installed editable without build isolation
@@ -16,7 +16,7 @@ $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet "setuptools>=77" wheel
 	$(BIN)/pip install --quiet torch==2.13.0
-	$(BIN)/pip install --quiet --no-build-isolation -e ".[dev]"
+	$(BIN)/pip install --quiet --no-build-isolation -e ".[dev,slurm]"
 	touch $@
 
 reproduce: venv
@@ -31,6 +31,10 @@ lint: venv
 
 test: venv lint
 	$(BIN)/pytest -n $(PYTEST_WORKERS) --dist loadfile
+
+# The live SLURM test (root: installs SLURM + munge, starts a one-node cluster; docs/cluster.md). CI runs it.
+test-cluster: venv
+	$(BIN)/pytest -p no:xdist -m cluster tests/cluster
 
 bench: venv
 	for b in bench/[a-z]*.py; do $(BIN)/python $$b || exit 1; done

@@ -12,11 +12,12 @@ REPO = Path(__file__).resolve().parents[1]
 
 def test_environment_yml_has_the_same_pins_as_pyproject():
     project = tomllib.loads((REPO / "pyproject.toml").read_text())["project"]
-    pins = set(project["dependencies"]) | set(project["optional-dependencies"]["dev"])
+    extras = project["optional-dependencies"]
+    pins = set(project["dependencies"]) | set(extras["dev"]) | set(extras["slurm"])
     env = yaml.safe_load((REPO / "environment.yml").read_text())
     pip = next(d["pip"] for d in env["dependencies"] if isinstance(d, dict) and "pip" in d)
     assert set(pip) - {"-e ."} == pins
-    assert all("==" in p for p in pins), "every dependency is pinned"
+    assert all("==" in p for p in pins | {p for extra in extras.values() for p in extra}), "every dependency is pinned"
     assert "torch==2.13.0" in pins
 
 
@@ -62,17 +63,17 @@ def test_every_third_party_import_is_a_declared_dependency():
 
 
 def test_ci_script_sets_ci_itself(tmp_path):
-    """`.ci/run` exports CI=true before `make test` whatever its caller's environment (a stand-in `make` on PATH
-    records what it sees)."""
+    """`.ci/run` exports CI=true before `make test` and `make test-cluster` whatever its caller's environment
+    (a stand-in `make` on PATH records what it sees)."""
     import os
     import stat
     import subprocess
 
     seen = tmp_path / "seen"
     fake = tmp_path / "make"
-    fake.write_text(f'#!/usr/bin/env bash\necho "CI=${{CI:-}} $*" > {seen}\n')
+    fake.write_text(f'#!/usr/bin/env bash\necho "CI=${{CI:-}} $*" >> {seen}\n')
     fake.chmod(fake.stat().st_mode | stat.S_IEXEC)
     env = {k: v for k, v in os.environ.items() if k != "CI"}
     env["PATH"] = f"{tmp_path}{os.pathsep}{env['PATH']}"
     subprocess.run(["bash", str(REPO / ".ci" / "run")], env=env, check=True, timeout=60)
-    assert seen.read_text().split() == ["CI=true", "test"]
+    assert seen.read_text().splitlines() == ["CI=true test", "CI=true test-cluster"]
