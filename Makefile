@@ -6,7 +6,7 @@ CORES  ?= 2
 CONFIG ?= config/config.yaml
 PYTEST_WORKERS ?= 2
 
-.PHONY: venv reproduce toy test test-cluster lint bench clean-results
+.PHONY: venv reproduce toy cluster test test-cluster lint bench clean-results
 
 # Bootstrap .venv with pinned dependencies. torch is installed first and pinned (2.13.0 CPU on our machines):
 # an unpinned torch pulls a multi-GB CUDA build. The package is installed editable without build isolation
@@ -24,6 +24,11 @@ reproduce: venv
 
 toy: venv
 	$(BIN)/snakemake all --cores $(CORES) --configfile=config/toy.yaml
+
+# On a SLURM cluster's login node: every job through sbatch with the SLURM workflow profile (docs/cluster.md).
+# Site options go in SNAKEMAKE_ARGS, e.g. SNAKEMAKE_ARGS="--profile ~/.config/snakemake/mysite".
+cluster: venv
+	$(BIN)/snakemake all --workflow-profile workflow/profiles/slurm --configfile=$(CONFIG) $(SNAKEMAKE_ARGS)
 
 lint: venv
 	$(BIN)/ruff check src tests bench
