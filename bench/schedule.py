@@ -1,0 +1,125 @@
+"""Simulate the workflow's schedule on N cores from per-job times: how long `snakemake --cores N all` takes when the
+jobs are independent except for their inputs (synth → edi → sfm → init per scene and B; train → evaluate per run;
+tables and figures last). Jobs take their rule's threads (config `threads`; init, resources, evaluate, tables and
+figures 1), a job starts as soon as its inputs exist and enough cores are free, longest remaining path first.
+
+Per-job seconds come from a finished run's Snakemake benchmark files (``DIR/benchmarks/<rule>/<name>.tsv``, the ``s``
+column) or, for jobs not run there, from ``--estimate RULE[:RUN]=SECONDS`` (e.g. ``train:eigs=318``); a job with
+neither is an error naming it.
+
+Run: ``.venv/bin/python bench/schedule.py --config config/toy.yaml --directory /path/of/a/run --cores 1 2 8``
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import heapq
+from pathlib import Path
+
+import yaml
+
+
+def jobs_of(cfg: dict) -> dict[str, tuple[str, list[str], int]]:
+    """Job id → (benchmark name, dependencies, threads) for the `all` target of ``cfg``."""
+    threads = int(cfg.get("threads", 2))
+    bins_default = int(cfg.get("edi", {}).get("bins", [4])[0])
+    scenes = cfg["scenes"]
+    runs = cfg.get("runs", {})
+    jobs: dict[str, tuple[str, list[str], int]] = {"resources": ("resources", [], 1)}
+    for s, spec in scenes.items():
+        builtin = "builtin" in spec
+        jobs[f"scene:{s}"] = (f"synth/{s}" if builtin else f"ingest/{s}", [], threads if builtin else 1)
+        for b in cfg.get("edi", {}).get("bins", [4]):
+            jobs[f"edi:{s}:{b}"] = (f"edi/{s}_b{b}", [f"scene:{s}"], threads)
+            jobs[f"sfm:{s}:{b}"] = (f"sfm/{s}_b{b}", [f"edi:{s}:{b}"], threads)
+            jobs[f"init:{s}:{b}"] = (f"init/{s}_b{b}", [f"sfm:{s}:{b}"], 1)
+    evals = []
+    for r, spec in runs.items():
+        b = int(spec.get("bins", bins_default))
+        gt_only = spec["method"] == "oracle"
+        for s, sspec in scenes.items():
+            if spec.get("scenes") and s not in spec["scenes"]:
+                continue
+            if gt_only and not ("builtin" in sspec or sspec.get("format") == "e2nerf-synthetic"):
+                continue
+            jobs[f"train:{s}:{r}"] = (f"train/{s}_b{b}_{r}", [f"init:{s}:{b}"], threads)
+            jobs[f"evaluate:{s}:{r}"] = (f"evaluate/{s}_b{b}_{r}", [f"train:{s}:{r}", "resources"], 1)
+            evals.append(f"evaluate:{s}:{r}")
+    jobs["tables"] = ("tables", evals, 1)
+    jobs["figures"] = ("figures", evals, 1)
+    return jobs
+
+
+def seconds(directory: Path | None, name: str, estimates: dict[str, float]) -> float:
+    if directory is not None:
+        p = directory / "benchmarks" / f"{name}.tsv"
+        if p.exists():
+            rows = list(csv.DictReader(p.open(), delimiter="\t"))
+            return float(rows[-1]["s"])
+    rule, _, rest = name.partition("/")
+    run = rest.rsplit("_", 1)[-1] if rule in ("train", "evaluate") else ""
+    for key in (f"{rule}:{run}", rule):
+        if key in estimates:
+            return estimates[key]
+    raise SystemExit(f"no benchmark and no --estimate for job {name}")
+
+
+def simulate(jobs: dict, times: dict[str, float], cores: int) -> float:
+    """Makespan (s) of list scheduling, longest remaining path first."""
+    succ: dict[str, list[str]] = {j: [] for j in jobs}
+    for j, (_, deps, _) in jobs.items():
+        for d in deps:
+            succ[d].append(j)
+    rank: dict[str, float] = {}
+
+    def r(j: str) -> float:
+        if j not in rank:
+            rank[j] = times[j] + max((r(k) for k in succ[j]), default=0.0)
+        return rank[j]
+
+    waiting = {j: len(jobs[j][1]) for j in jobs}
+    ready = [(-r(j), j) for j in jobs if waiting[j] == 0]
+    heapq.heapify(ready)
+    running: list[tuple[float, str]] = []
+    free, now = cores, 0.0
+    while ready or running:
+        started = True
+        while started:
+            started = False
+            for _, j in sorted(ready):
+                need = min(jobs[j][2], cores)
+                if need <= free:
+                    ready.remove((-r(j), j))
+                    heapq.heapify(ready)
+                    free -= need
+                    heapq.heappush(running, (now + times[j], j))
+                    started = True
+                    break
+        now, j = heapq.heappop(running)
+        free += min(jobs[j][2], cores)
+        for k in succ[j]:
+            waiting[k] -= 1
+            if waiting[k] == 0:
+                heapq.heappush(ready, (-r(k), k))
+    return now
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--config", required=True)
+    ap.add_argument("--directory", type=Path, default=None, help="workflow directory with a finished run's benchmarks/")
+    ap.add_argument("--cores", type=int, nargs="+", default=[2, 8])
+    ap.add_argument("--estimate", action="append", default=[], metavar="RULE[:RUN]=SECONDS")
+    args = ap.parse_args()
+    cfg = yaml.safe_load(Path(args.config).read_text())
+    est = {k: float(v) for k, v in (e.split("=", 1) for e in args.estimate)}
+    jobs = jobs_of(cfg)
+    times = {j: seconds(args.directory, jobs[j][0], est) for j in jobs}
+    print(f"{len(jobs)} jobs, {sum(times.values()) / 3600:.2f} h of job time in total")
+    for c in args.cores:
+        print(f"--cores {c}: {simulate(jobs, times, c) / 3600:.2f} h")
+
+
+if __name__ == "__main__":
+    main()
