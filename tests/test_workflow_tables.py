@@ -19,8 +19,6 @@ from tests.conftest import SHARED_REAL, require
 
 REPO = Path(__file__).resolve().parents[1]
 CONFIGS = sorted((REPO / "config").glob("*.yaml"))
-# rows of the default `tables:` mapping waiting for methods that are not in the registry yet
-FUTURE_RUNS = {"bad-gaussians", "besplat", "evagaussians"}
 
 
 def snakemake(*args: str, cwd: Path = REPO, timeout: int = 600) -> subprocess.CompletedProcess:
@@ -48,15 +46,15 @@ def test_config_runs_use_registered_methods(path):
 
 @pytest.mark.parametrize("name", ["config.yaml", "e2nerf.yaml"])
 def test_full_suites_fill_every_table_row_they_can(name):
-    """In the full suites every table row names a configured run (or a method still to be registered, or null),
-    and every configured run appears in some table."""
+    """In the full suites every table row names a configured run (or null: paper values only), and every
+    configured run appears in some table."""
     cfg = yaml.safe_load((REPO / "config" / name).read_text())
     runs = cfg["runs"]
     tables = {**schema_tables(), **cfg.get("tables", {})}
     used = set()
     for table, rows in tables.items():
         for row, run in rows.items():
-            assert run is None or run in runs or run in FUTURE_RUNS, f"{name}: {table}.{row} -> {run}"
+            assert run is None or run in runs, f"{name}: {table}.{row} -> {run}"
             used.add(run)
     assert set(runs) <= used, f"{name}: runs in no table: {sorted(set(runs) - used)}"
 
@@ -65,8 +63,8 @@ def test_default_config_schedules_every_table_variant():
     proc = snakemake("all", "-n", "--forceall", "--cores", "2", "--configfile=config/config.yaml")
     assert proc.returncode == 0, proc.stdout + proc.stderr
     counts = job_counts(proc.stdout)
-    # 16 runs on 6 scenes, each evaluated; EDI/SfM/init at B = 4, 6, 8
-    assert counts["train"] == 96 and counts["evaluate"] == 96
+    # 19 runs on 6 scenes, each evaluated; EDI/SfM/init at B = 4, 6, 8
+    assert counts["train"] == 114 and counts["evaluate"] == 114
     assert counts["edi"] == counts["sfm"] == counts["init"] == 18
     assert counts["tables"] == counts["figures"] == 1
     # shared runs are trained once: eigs feeds Tables I-V from one folder per scene
@@ -95,8 +93,8 @@ def test_e2nerf_config_dry_runs_on_an_exported_layout(tmp_path):
     proc = snakemake("all", "-n", "--forceall", "--cores", "2", f"--configfile={cfg}")
     assert proc.returncode == 0, proc.stdout + proc.stderr
     counts = job_counts(proc.stdout)
-    # 11 scenes ingested; 14 runs, oracle only on the 6 synthetic scenes: 13·11 + 6 = 149
-    assert counts["ingest"] == 11 and counts["train"] == 149 and counts["evaluate"] == 149
+    # 11 scenes ingested; 17 runs, oracle only on the 6 synthetic scenes: 16·11 + 6 = 182
+    assert counts["ingest"] == 11 and counts["train"] == 182 and counts["evaluate"] == 182
     assert "--format e2nerf-synthetic" in proc.stdout and "--format e2nerf-real" in proc.stdout
     assert '"steps":30000' in proc.stdout
     assert '"6":null' in proc.stdout  # Table III's N = 6, 8 rows: paper values only
