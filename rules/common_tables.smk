@@ -1,4 +1,5 @@
 # Helpers of rules/evaluate.smk and rules/tables.smk (evaluation, tables, figures); needs rules/common.smk.
+from eigs.tables.rows import table_rows
 
 
 # --- evaluate -------------------------------------------------------------------------------------------------
@@ -11,7 +12,7 @@ def eval_targets():
 
 def evaluate_options(wildcards):
     """`eigs evaluate` flags from the `evaluate:` config section (unset options keep the CLI's defaults)."""
-    e = config["evaluate"]
+    e = config.get("evaluate", {})
     return f"--path-frames {int(e['path_frames'])}" if "path_frames" in e else ""
 
 
@@ -19,9 +20,13 @@ def evaluate_options(wildcards):
 TABLE_NAMES = ["table1", "table2", "table3", "table4", "table5"]
 
 
+TABLE_ROWS = table_rows(config.get("tables"))
+
+
 def tables_json():
-    """The `tables:` mapping restricted to configured runs (others -> null: paper values only), shell-quoted JSON."""
-    t = config["tables"]
+    """The row mappings (defaults: eigs.tables.rows) restricted to configured runs (others -> null: paper values
+    only), shell-quoted JSON."""
+    t = TABLE_ROWS
     values = {name: {row: (run if run in RUNS else None) for row, run in t[name].items()} for name in t}
     return shlex.quote(json.dumps(values, separators=(",", ":")))
 
@@ -29,7 +34,7 @@ def tables_json():
 def grid_runs():
     """Runs in the qualitative grids: Table I's rows that have a run, in the table's order (comma-separated)."""
     out = []
-    for run in config["tables"]["table1"].values():
+    for run in TABLE_ROWS["table1"].values():
         if run in RUNS and run not in out:
             out.append(run)
     return ",".join(out) or ",".join(sorted(RUNS))

@@ -1,5 +1,5 @@
 # The paper's Tables I-V and the figures from every evaluated run. Which run fills which row: the config's
-# `tables:` section (row key -> run name, defaults in the schema); rows whose run is not in `runs:` show the paper's
+# `tables:` section (row key -> run name, defaults in eigs.tables.rows); rows whose run is not in `runs:` show the paper's
 # values only. docs/evaluation.md.
 
 

@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 import yaml
 
+from eigs.tables.rows import table_rows
 from eigs.train.methods import method_names
 from tests.conftest import SHARED_REAL, require
 
@@ -31,9 +32,6 @@ def job_counts(out: str) -> dict[str, int]:
     return {m.group(1): int(m.group(2)) for m in re.finditer(r"^(\w+)\s+(\d+)$", block, re.M)}
 
 
-def schema_tables() -> dict:
-    schema = yaml.safe_load((REPO / "workflow/schemas/config.schema.yaml").read_text())
-    return {k: v["default"] for k, v in schema["properties"]["tables"]["properties"].items()}
 
 
 @pytest.mark.parametrize("path", CONFIGS, ids=lambda p: p.name)
@@ -50,7 +48,7 @@ def test_full_suites_fill_every_table_row_they_can(name):
     configured run appears in some table."""
     cfg = yaml.safe_load((REPO / "config" / name).read_text())
     runs = cfg["runs"]
-    tables = {**schema_tables(), **cfg.get("tables", {})}
+    tables = table_rows(cfg.get("tables"))
     used = set()
     for table, rows in tables.items():
         for row, run in rows.items():

@@ -184,3 +184,14 @@ def test_paper_transcription_spot_checks():
     assert t2["ours"]["psnr"] - t2["b"]["psnr"] == pytest.approx(2.71)
     assert t2["ours"]["psnr"] - t2["ours-minus"]["psnr"] == pytest.approx(3.69)
     assert TABLES["table3"]["rows"]["8"]["psnr"] - TABLES["table3"]["rows"]["6"]["psnr"] == pytest.approx(0.12)
+
+
+def test_table_rows_defaults_and_overrides():
+    from eigs.tables.rows import DEFAULT_ROWS, table_rows
+
+    rows = table_rows({"table3": {4: "eigs", 6: None}})
+    assert rows["table3"] == {"4": "eigs", "6": None}  # a table given replaces its default as a whole
+    assert rows["table1"] == DEFAULT_ROWS["table1"] and rows is not DEFAULT_ROWS
+    # every default row key is a paper row or the oracle
+    for name, mapping in DEFAULT_ROWS.items():
+        assert set(mapping) - {"oracle", "edi-3dgs"} <= set(TABLES[name]["rows"]), name

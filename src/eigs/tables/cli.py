@@ -9,13 +9,15 @@ HELP = "Tables I-V (CSV, Markdown, LaTeX) from metrics.json files, the paper's v
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.epilog = (
-        "TABLES maps each table (table1 … table5) to its rows: row key → run name, e.g. "
-        '\'{"table1": {"3dgs": "3dgs", "eigs": "eigs", "oracle": "oracle"}}\'. Row keys are the paper\'s '
-        "(eigs.tables.paper); other keys add rows; the key `oracle` is the upper bound. Writes "
+        "TABLES maps tables (table1 … table5) to their rows: row key → run name, e.g. "
+        '\'{"table1": {"3dgs": "3dgs", "eigs": "eigs", "oracle": "oracle"}}\'; a table given replaces its default '
+        "mapping (eigs.tables.rows). Row keys are the paper's (eigs.tables.paper); other keys add rows; the key "
+        "`oracle` is the upper bound. Writes "
         "table{1..5}.{csv,md,tex}, tables.md (all tables) and per_scene.csv into OUTPUT."
     )
     p.add_argument("metrics", nargs="+", help="metrics.json files (eigs evaluate), one per run and scene")
-    p.add_argument("--tables", required=True, metavar="JSON", help="table → {row key: run name} as JSON")
+    p.add_argument("--tables", default="{}", metavar="JSON", help="table → {row key: run name} as JSON "
+                   "(default: eigs.tables.rows)")  # fmt: skip
     p.add_argument("-o", "--output", required=True, help="output directory (results/tables)")
 
 
@@ -51,6 +53,7 @@ def run(args: argparse.Namespace) -> int:
     from eigs.errors import EigsError
     from eigs.tables.build import build_tables
     from eigs.tables.collect import summarise
+    from eigs.tables.rows import table_rows
     from eigs.tables.write import to_markdown, write_table
     from eigs.util.atomic import atomic_path
 
@@ -61,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
     if not isinstance(mappings, dict) or not all(isinstance(m, dict) for m in mappings.values()):
         raise EigsError("--tables", "expected {table: {row key: run name}}")
     runs = summarise(args.metrics)
-    tables = build_tables(mappings, runs)
+    tables = build_tables(table_rows(mappings), runs)
     out = Path(args.output)
     for t in tables:
         write_table(t, out)

@@ -1,0 +1,37 @@
+"""Which run fills which row of the paper's tables by default (the one place of these defaults): table → {row key →
+run name}. Row keys are those of :mod:`eigs.tables.paper`; ``oracle`` is the upper-bound row. The config's
+``tables:`` section replaces a table's mapping as a whole (:func:`table_rows`); a row whose run is not configured
+shows the paper's values only, so adding a method is one ``runs:`` line under the name used here."""
+
+from __future__ import annotations
+
+from typing import Any
+
+DEFAULT_ROWS: dict[str, dict[str, str | None]] = {
+    "table1": {
+        "3dgs": "3dgs",
+        "deblurring-gs": "deblurring-gs",
+        "deblurring-gs+": "deblurring-gs+",
+        "e2gs": "e2gs",
+        "evagaussians": "evagaussians",
+        "besplat": "besplat",
+        "bad-gaussians": "bad-gaussians",
+        "eigs": "eigs",
+        "edi-3dgs": "edi-3dgs",
+        "oracle": "oracle",
+    },
+    "table2": {"3dgs": "3dgs", "a": "deblurring-gs", "b": "eigs-b", "ours-minus": "eigs-minus", "ours": "eigs",
+               "oracle": "oracle"},  # fmt: skip
+    "table3": {"4": "eigs", "6": "eigs-b6", "8": "eigs-b8", "oracle": "oracle"},
+    "table4": {"64": "eigs-w64", "128": "eigs-w128", "256": "eigs", "512": "eigs-w512", "oracle": "oracle"},
+    "table5": {"2": "eigs-d2", "3": "eigs", "4": "eigs-d4", "oracle": "oracle"},
+}
+
+
+def table_rows(overrides: dict[str, Any] | None = None) -> dict[str, dict[str, str | None]]:
+    """The row mappings of every table: :data:`DEFAULT_ROWS` with the tables of ``overrides`` (the config's
+    ``tables:`` section) replacing theirs. Row keys are strings (YAML may read ``4:`` as an integer)."""
+    out = {name: dict(rows) for name, rows in DEFAULT_ROWS.items()}
+    for name, rows in (overrides or {}).items():
+        out[name] = {str(k): (None if v is None else str(v)) for k, v in rows.items()}
+    return out
