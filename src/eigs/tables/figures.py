@@ -100,8 +100,8 @@ def qualitative_grid(scene: str, entries: list[tuple[str, Path, dict[str, Any]]]
         panels.append(("ground truth", read_png(gt)))
     h, w = panels[0][1].shape[:2]
     n = len(panels)
-    cols = min(n, 6)
-    nrows = math.ceil(n / cols)
+    nrows = math.ceil(n / 8)  # at most 8 panels a row, rows balanced
+    cols = math.ceil(n / nrows)
     fig, axes = plt.subplots(nrows, cols, figsize=(2.6 * cols * w / max(h, w) + 0.2, 2.6 * nrows * h / max(h, w) + 0.5),
                              squeeze=False)  # fmt: skip
     for ax in axes.ravel():
