@@ -106,6 +106,8 @@ def evaluate_run(
     if len(cloud) == 0:
         raise EigsError(run_dir / "model.ply", "the model has no Gaussians")
     cloud.validate(run_dir / "model.ply")
+    if device == "cuda" and not torch.cuda.is_available():
+        raise EigsError("--device", "cuda requested but no CUDA device is available")
     dev = torch.device("cuda" if device == "cuda" or (device == "auto" and torch.cuda.is_available()) else "cpu")
     g = cloud_tensors(cloud, int(train["sh_degree"]), int(scene.channels), dev)
     bg = scene.background if scene.background is not None else np.zeros(scene.channels)
