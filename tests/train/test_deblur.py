@@ -168,3 +168,28 @@ def test_zero_last_layer_starts_without_displacement(data):
     out = m.ade(x, m.pose_inputs[int(m.views[0])])
     assert out.abs().max().item() == 0.0
     assert m.ade.first_x.weight.abs().max().item() > 0  # only the last layer is zero
+
+
+@pytest.mark.parametrize("name", ["eigs", "e2gs", "bad-gaussians", "besplat"])
+def test_sharp_views_use_one_render(data, name):
+    """A view EDI marks sharp is explained by one render at its reference pose (the photometric loss of that
+    render against the frame); the others keep their N+1 (or n_virtual) renders; the switch turns it off."""
+    import dataclasses
+
+    sharp = np.zeros(data.n_views, bool)
+    tr = _method(data, name)
+    v0 = int(tr.method.views[0])
+    sharp[v0] = True
+    d2 = dataclasses.replace(data, edi=dataclasses.replace(data.edi, sharp=sharp))
+    m = _method(d2, name).method
+    model = _method(d2, name).model
+    out = m.step(model, 0, 0, 0)
+    assert len(out.infos) == 1 and set(out.terms) == {"l1", "dssim"}
+    img, _, _ = model.render(d2.c2w[v0, 0], m.K, d2.width, d2.height, m.background, 0)
+    expect, _, _ = photometric_loss(img, d2.blurry[v0], 0.2)
+    torch.testing.assert_close(out.loss, expect)
+    other = int(np.nonzero(np.isin(np.arange(d2.n_views), m.views) & ~sharp)[0][0])
+    sample = int(np.nonzero(m.views == other)[0][0])
+    assert len(m.step(model, sample, 0, 0).infos) > 1
+    off = _method(d2, name, sharp_one_render=False).method
+    assert len(off.step(model, 0, 0, 0).infos) > 1

@@ -47,6 +47,7 @@ TRAJECTORY_OPTIONS: dict[str, Any] = {
     "event_loss": "none",  # "none", "eigs" (Eq. 9–10, L1 of the integral) or "normalized" (BeSplat)
     "lambda_event": 0.0,
     "lambda_blur": 1.0,
+    "sharp_one_render": True,  # views EDI marks sharp (too few events) use one render at P_ref, blur loss only
 }
 
 
@@ -101,6 +102,7 @@ class TrajectoryMethod(Method):
         self.blurry = data.blurry.to(device)
         self.response = data.camera_response
         edi = data.edi
+        self.sharp = np.asarray(edi.sharp, bool)  # (V,)
         self.edi_mode = edi.mode
         self.counts = torch.from_numpy(edi.cum_counts).to(device)
         self.event_mask = torch.from_numpy(edi.event_mask).to(device) if edi.event_mask is not None else None
@@ -138,6 +140,11 @@ class TrajectoryMethod(Method):
         v = int(self.views[sample])
         p = model.params
         images, infos = [], []
+        if o["sharp_one_render"] and bool(self.sharp[v]):  # no motion to model: one render, the frame as target
+            img, _, info = model.render(self.ref[v], self.K, d.width, d.height, self.background, sh_degree)
+            info["means2d"].retain_grad()
+            loss, l1, dssim = photometric_loss(img, self.blurry[v], self.cfg.lambda_dssim)
+            return StepOutput(loss, {"l1": l1.item(), "dssim": dssim.item()}, [info])
         for g in self.gaussian_motions(v):
             means, quats = transform_gaussians(p["means"], p["quats"], g)
             img, _, info = model.render(self.ref[v], self.K, d.width, d.height, self.background, sh_degree,

@@ -59,6 +59,7 @@ COMMON_OPTIONS: dict[str, Any] = {
     # average of the frame; docs/methods.md)
     "blur_target": "blurry",
     "ade_zero_last": False,  # beyond the paper: the ADE's last layer starts at zero (no displacement at step 0)
+    "sharp_one_render": True,  # views EDI marks sharp (too few events) use one render and the photometric loss only
 }
 
 
@@ -109,6 +110,7 @@ class MultiRender(Method):
         self.response = data.camera_response
         self.blurry = (data.blurry if o["blur_target"] == "blurry" else self.discrete_targets()).to(device)
         edi = data.edi
+        self.sharp = np.asarray(edi.sharp, bool)  # (V,) views with too few events to have moved
         self.edi_mode = edi.mode
         self.counts = torch.from_numpy(edi.cum_counts).to(device)  # (V, L, H, W) int32
         self.event_mask = torch.from_numpy(edi.event_mask).to(device) if edi.event_mask is not None else None
@@ -247,9 +249,19 @@ class MultiRender(Method):
         w[0] = w[-1] = 0.5
         return w / w.sum()
 
+    def sharp_step(self, model: GaussianModel, v: int, sh_degree: int) -> StepOutput:
+        """A view without motion (EDI marked it sharp): one render at its reference pose against the frame."""
+        d = self.data
+        image, _, info = model.render(self.c2w[v, 0], self.K, d.width, d.height, self.background, sh_degree)
+        info["means2d"].retain_grad()
+        loss, l1, dssim = photometric_loss(image, self.blurry[v], self.cfg.lambda_dssim)
+        return StepOutput(loss, {"l1": l1.item(), "dssim": dssim.item()}, [info])
+
     def step(self, model: GaussianModel, sample: int, step: int, sh_degree: int) -> StepOutput:
         o = self.options
         v = int(self.views[sample])
+        if o["sharp_one_render"] and bool(self.sharp[v]):
+            return self.sharp_step(model, v, sh_degree)
         images, infos, dx, latent_pos = self.renders(model, v, sh_degree)
         stack = torch.stack(images)  # (R, H, W, C) in time order
         w = self.blur_weights(len(images)).to(stack.dtype).reshape(-1, 1, 1, 1)

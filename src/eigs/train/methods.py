@@ -157,4 +157,3 @@ class Oracle(ImageMethod):
 def method_names() -> list[str]:
     _load_all()
     return sorted(REGISTRY)
-
