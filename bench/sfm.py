@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import subprocess
 import sys
 import time
@@ -38,7 +39,7 @@ def blurry_edi(scene_h5: Path, out: Path) -> None:
     import cv2
 
     from eigs.artifacts.edi import EdiResult, latent_png_name, write_edi
-    from eigs.scene.io import read_scene
+    from eigs.scene import read_scene
 
     s = read_scene(scene_h5, events=False)
     b = s.frames.blurry
@@ -76,6 +77,18 @@ def run_sfm_cli(scene_h5: Path, edi_dir: Path, out: Path, reuse: bool) -> tuple[
     rep["wall_s"] = dt
     (out / "report.json").write_text(json.dumps(rep, indent=2) + "\n")
     return rep, dt, ""
+
+
+MIN_VIEWS_FOR_ATE = 3  # a Sim(3) maps any two camera centres exactly onto any other two
+
+
+def blurry_note(err: str, scene_h5: Path) -> str:
+    """The SfM failure note of the blurry-frames run, naming the images it was given: the scene's blurry frames
+    (one per view), not latent frames."""
+    from eigs.scene import read_scene
+
+    n = read_scene(scene_h5, events=False).n_views
+    return re.sub(r"from \d+ latent frames", f"from the {n} blurry frames", err)
 
 
 def fmt(x, spec=".3g") -> str:
@@ -126,13 +139,16 @@ def main() -> None:
             blurry_edi(scene_h5, bdir)
         brep, bdt, berr = run_sfm_cli(scene_h5, bdir, bdir / "sfm", args.reuse)
         if brep is None:
-            blur_rows.append([name, "0 (failed)", "", "", berr])
+            blur_rows.append([name, "0 (failed)", "", "", blurry_note(berr, scene_h5)])
         else:
             ba, breg = brep.get("accuracy", {}), brep["registration"]
             reg_txt = f"{breg['registered']}/{breg['images']} ({100 * breg['fraction']:.0f} %)"
-            blur_rows.append(
-                [name, reg_txt, fmt(ba.get("ate_percent_of_extent")), fmt(ba.get("rotation_error_deg_median")), ""]
-            )
+            # two registered centres always align exactly under a similarity: an ATE needs three views
+            few = breg["registered"] < MIN_VIEWS_FOR_ATE
+            ate = "n/a" if few else fmt(ba.get("ate_percent_of_extent"))
+            rot = "n/a" if few else fmt(ba.get("rotation_error_deg_median"))
+            note = f"ATE needs ≥ {MIN_VIEWS_FOR_ATE} registered views" if few else ""
+            blur_rows.append([name, reg_txt, ate, rot, note])
             tm = brep["timings_s"]
             time_rows.append([name, "blurry", breg["images"], tm.get("features"), tm.get("matching"),
                               tm.get("mapping"), bdt])  # fmt: skip

@@ -1,9 +1,14 @@
 # Shared helpers: config validation, scene lists, wildcard constraints, stage targets.
+# Stage options: every default lives in the stage's options dataclass (eigs.events.options.EdiOptions,
+# eigs.sfm.options.SfmConfig / InitOptions, eigs.synth.scenes.DEFAULTS, eigs.train.config.TrainConfig); the schema
+# only types and bounds them, and a rule passes its config section unchanged as one JSON object (`--config`).
 import json
 import re
 import shlex
 
 from snakemake.utils import validate
+
+from eigs.events.options import DEFAULT_BINS
 
 
 validate(config, schema="../workflow/schemas/config.schema.yaml")
@@ -21,17 +26,27 @@ def names_regex(names):
 
 
 def threads_for(stage):
-    """Threads for a numeric rule (config `threads`)."""
-    return int(config.get("threads", 2))
+    """Threads for a numeric rule (config `threads`; its default comes from the schema)."""
+    return int(config["threads"])
+
+
+def config_json(values):
+    """One shell-quoted JSON object (sorted keys, so params compare equal between runs) for a stage's `--config`."""
+    return shlex.quote(json.dumps(values, sort_keys=True, separators=(",", ":")))
+
+
+def section_json(section, exclude=()):
+    """The config section `section` (only the keys the config sets) as `config_json`."""
+    return config_json({k: v for k, v in config.get(section, {}).items() if k not in exclude})
 
 
 def synth_builtin(wildcards):
     return SCENES[wildcards.scene]["builtin"]
 
 
-def synth_overrides(wildcards):
-    """Deterministic JSON (sorted keys) so params compare equal between runs."""
-    return json.dumps(SCENES[wildcards.scene].get("overrides", {}), sort_keys=True, separators=(",", ":"))
+def synth_config(wildcards):
+    """The scene's `overrides:` for `eigs synth --config` (defaults: eigs.synth.scenes)."""
+    return config_json(SCENES[wildcards.scene].get("overrides", {}))
 
 
 def ingest_source(wildcards):
@@ -50,53 +65,26 @@ def ingest_options(wildcards):
 ALL_SCENES = sorted(SCENES)
 
 
-def sfm_options(wildcards):
-    """`eigs sfm` flags from the `sfm:` config section."""
-    s = config.get("sfm", {})
-    opts = [
-        f"--mode {s.get('mode', 'auto')}",
-        f"--matcher {s.get('matcher', 'auto')}",
-        f"--min-registered-fraction {float(s.get('min_registered_fraction', 0.5))}",
-    ]
-    if not s.get("allow_given", True):
-        opts.append("--no-given")
-    if not s.get("interpolate_unregistered", True):
-        opts.append("--no-interpolate")
-    if s.get("global_mapping", False):
-        opts.append("--global-mapping")
-    if s.get("refine_intrinsics", False):
-        opts.append("--refine-intrinsics")
-    if not s.get("register_test_cameras", True):
-        opts.append("--no-register-test")
-    return " ".join(opts)
+def sfm_config(wildcards):
+    """The `sfm:` section for `eigs sfm --config` (defaults: eigs.sfm.options.SfmConfig)."""
+    return section_json("sfm")
 
 
-def init_options(wildcards):
-    s = config.get("init", {})
-    return (
-        f"--min-points {int(s.get('min_points', 1000))} --random {int(s.get('random', 10000))} "
-        f"--sh-degree {int(s.get('sh_degree', 3))}"
-    )
+def init_config(wildcards):
+    """The `init:` section for `eigs init --config` (defaults: eigs.sfm.options.InitOptions)."""
+    return section_json("init")
 
 
 # --- edi (rules/edi.smk) --------------------------------------------------------------------------------------
 def edi_bins():
-    """The configured bin counts (config `edi: bins:`, default [4])."""
-    return [int(b) for b in config.get("edi", {}).get("bins", [4])]
+    """The configured bin counts (config `edi: bins:`, default [eigs.events.options.DEFAULT_BINS])."""
+    return [int(b) for b in config.get("edi", {}).get("bins", [DEFAULT_BINS])]
 
 
-def edi_options(wildcards):
-    """`eigs edi` flags from the `edi:` config section (the bins come from the {bins} wildcard)."""
-    e = config.get("edi", {})
-    opts = [
-        f"--mode {e.get('mode', 'auto')}",
-        f"--threshold-scope {e.get('threshold_scope', 'scene')}",
-        f"--mask-top {float(e.get('mask_top', 0.01))}",
-        f"--mask-factor {float(e.get('mask_factor', 8.0))}",
-    ]
-    if e.get("threshold") is not None:
-        opts.append(f"--threshold {float(e['threshold'])}")
-    return " ".join(opts)
+def edi_config(wildcards):
+    """The `edi:` section for `eigs edi --config`, without `bins` (those come from the {bins} wildcard;
+    defaults: eigs.events.options.EdiOptions)."""
+    return section_json("edi", exclude=("bins",))
 
 
 # --- train (rules/train.smk) ----------------------------------------------------------------------------------

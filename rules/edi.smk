@@ -11,8 +11,7 @@ rule edi:
         scene=names_regex(sorted(SCENES)),
         bins=r"\d+",
     params:
-        options=edi_options,
-        per_pixel=lambda wc: "" if config.get("edi", {}).get("per_pixel_threshold", True) else "--no-per-pixel-threshold",
+        config=edi_config,
     log:
         "logs/edi/{scene}_b{bins}.log",
     benchmark:
@@ -24,7 +23,7 @@ rule edi:
         "../workflow/envs/eigs.yaml"
     shell:
         "eigs edi {input} -o {output.edi} --latent-dir {output.latent} --bins {wildcards.bins} "
-        "{params.options} {params.per_pixel} --threads {threads} > {log} 2>&1"
+        "--config {params.config} --threads {threads} > {log} 2>&1"
 
 
 rule all_edi:

@@ -12,7 +12,7 @@ rule sfm:
         scene=names_regex(ALL_SCENES),
         bins=r"\d+",
     params:
-        options=sfm_options,
+        config=sfm_config,
     log:
         "logs/sfm/{scene}_b{bins}.log",
     benchmark:
@@ -23,7 +23,7 @@ rule sfm:
     conda:
         "../workflow/envs/eigs.yaml"
     shell:
-        "eigs sfm {input.scene} {input.edi} --latent-dir {input.latent} -o {output} {params.options} "
+        "eigs sfm {input.scene} {input.edi} --latent-dir {input.latent} -o {output} --config {params.config} "
         "--threads {threads} > {log} 2>&1"
 
 
@@ -36,7 +36,7 @@ rule init:
         scene=names_regex(ALL_SCENES),
         bins=r"\d+",
     params:
-        options=init_options,
+        config=init_config,
     log:
         "logs/init/{scene}_b{bins}.log",
     benchmark:
@@ -47,7 +47,7 @@ rule init:
     conda:
         "../workflow/envs/eigs.yaml"
     shell:
-        "eigs init {input} -o {output} {params.options} > {log} 2>&1"
+        "eigs init {input} -o {output} --config {params.config} > {log} 2>&1"
 
 
 rule all_sfm:

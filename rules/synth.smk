@@ -9,7 +9,7 @@ rule synth:
         scene=names_regex(BUILTIN_SCENES),
     params:
         builtin=synth_builtin,
-        overrides=synth_overrides,
+        config=synth_config,
     log:
         "logs/synth/{scene}.log",
     benchmark:
@@ -20,7 +20,7 @@ rule synth:
     conda:
         "../workflow/envs/eigs.yaml"
     shell:
-        "eigs synth --scene {params.builtin} --overrides '{params.overrides}' "
+        "eigs synth --scene {params.builtin} --config {params.config} "
         "-o {output.scene} --contact-sheet {output.sheet} --threads {threads} > {log} 2>&1"
 
 

@@ -27,6 +27,15 @@ def test_subcommand_help(name, capsys):
     out = capsys.readouterr().out
     assert f"usage: eigs {name}" in out
     assert "--threads" in out
+    assert " ".join(out.split()).endswith(f"implemented in {COMMANDS[name]}")  # the subcommand → module map
+
+
+def test_subcommand_modules_live_in_their_stage_package():
+    """Each subcommand's module is a `cli` module of one package (`<package>.cli` or `<package>.<x>_cli`)."""
+    import re
+
+    for name, module in COMMANDS.items():
+        assert re.fullmatch(r"eigs\.[a-z]+\.([a-z]+_)?cli", module), (name, module)
 
 
 def test_no_subcommand_prints_help_and_fails(capsys):

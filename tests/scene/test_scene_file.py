@@ -343,10 +343,10 @@ def test_validation_on_write(tmp_path, mutate, message):
 def _write_unchecked(scene: Scene, path, monkeypatch) -> None:
     """Write ``scene`` with the writer's own layout but none of its checks, then the event arrays exactly as
     given (any length or dtype), as a file written by another tool might be."""
-    import eigs.scene.io as scene_io
+    import eigs.scene.file as scene_file
 
     for name in ("validate_header", "check_event_chunk", "check_view_index", "check_event_dtypes"):
-        monkeypatch.setattr(scene_io, name, lambda *a, **k: None)
+        monkeypatch.setattr(scene_file, name, lambda *a, **k: None)
     ev = scene.events
     write_scene(Scene(**{**scene.__dict__, "events": None}), path)
     monkeypatch.undo()

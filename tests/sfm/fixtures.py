@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from eigs.artifacts.edi import EdiResult, latent_png_name, write_edi
-from eigs.scene.io import write_scene
+from eigs.scene import write_scene
 from eigs.scene.model import Camera, Frames, Poses, Scene, SharpImages
 
 from . import raycast as rc

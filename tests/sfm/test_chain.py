@@ -11,7 +11,7 @@ import pytest
 from eigs.artifacts.gaussians import read_gaussian_ply
 from eigs.artifacts.poses import METHOD_GIVEN, read_poses, read_test_cameras
 from eigs.cli import main
-from eigs.scene.io import read_scene
+from eigs.scene import read_scene
 from eigs.sfm.align import Sim3, extent
 
 

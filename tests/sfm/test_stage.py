@@ -109,7 +109,7 @@ def test_unregistered_latents_are_interpolated_within_their_view(scene8, tmp_pat
     bad = [(2, 1), (5, 2)]
     for v, k in bad:
         cv2.imwrite(str(latent / latent_png_name(v, k)), rng.integers(0, 256, (96, 128, 3), dtype=np.uint8))
-    cfg = SfmConfig(mode="colmap", register_test=False)
+    cfg = SfmConfig(mode="colmap", register_test_cameras=False)
     rep = run_sfm(scene8["scene"], scene8["edi"], tmp_path / "sfm", latent_dir=latent, cfg=cfg)
     assert sorted(rep["registration"]["unregistered"]) == sorted(latent_png_name(v, k) for v, k in bad)
     poses = read_poses(tmp_path / "sfm")
@@ -128,7 +128,7 @@ def test_unregistered_latents_are_interpolated_within_their_view(scene8, tmp_pat
     assert np.all(np.isfinite(tc.c2w))
     assert np.median(np.linalg.norm(tc.c2w[:, :3, 3] - expected[:, :3, 3], axis=1)) < 0.01  # canonical units
 
-    strict = SfmConfig(mode="colmap", register_test=False, min_registered_fraction=1.0)
+    strict = SfmConfig(mode="colmap", register_test_cameras=False, min_registered_fraction=1.0)
     with pytest.raises(
         EigsError, match=r"only 22 of 24 latent frames registered.*v0002_k01.png.*Remedies: more latent"
     ):
@@ -146,7 +146,7 @@ def test_nothing_reconstructed_says_so(scene8, tmp_path):
 
 
 def test_input_errors(scene8, tmp_path, capsys):
-    from eigs.scene.io import read_scene, write_scene
+    from eigs.scene import read_scene, write_scene
 
     # given mode on a scene without poses
     s = read_scene(scene8["scene"], events=False)

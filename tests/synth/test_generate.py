@@ -186,7 +186,8 @@ def test_srgb_response_round_trip(tmp_path):
 
 
 def test_textures_are_bundled_and_linear():
-    from eigs.synth.textures import TEXTURE_NAMES, linear_to_srgb, load_texture, srgb_to_linear
+    from eigs.synth.textures import TEXTURE_NAMES, load_texture
+    from eigs.util.image import linear_to_srgb, srgb_to_linear
 
     for name in TEXTURE_NAMES:
         t = load_texture(name, 32)
@@ -202,7 +203,8 @@ def test_texture_crop_is_a_window_of_the_photograph():
     import skimage.data
     from skimage.transform import resize
 
-    from eigs.synth.textures import load_texture, srgb_to_linear
+    from eigs.synth.textures import load_texture
+    from eigs.util.image import srgb_to_linear
 
     raw = skimage.data.camera().astype(np.float64) / 255.0
     ref = srgb_to_linear(resize(raw[128:256, 256:384], (32, 32), order=1, anti_aliasing=True, mode="reflect"))

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 import re
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -27,6 +28,24 @@ _PNG = re.compile(r"^v(\d{4})_k(\d{2})\.png$")
 def latent_png_name(view: int, k: int) -> str:
     """File name of latent frame ``k`` of training view ``view`` (e.g. ``v0007_k03.png``)."""
     return f"v{view:04d}_k{k:02d}.png"
+
+
+def write_latent_pngs(
+    latent: np.ndarray, directory: str | os.PathLike, slots: Iterable[tuple[int, int]] | None = None
+) -> int:
+    """The one latent-PNG writer: frames ``latent[v, k]`` ((V, L, H, W, C) float in [0, 1]) as 8-bit PNGs named
+    :func:`latent_png_name` in ``directory``, created atomically (replacing it). ``slots``: the (v, k) to write
+    (default: all). Rounding: :func:`eigs.util.image.to_uint8`. Returns the number of files."""
+    from eigs.util.image import write_png
+
+    if slots is None:
+        slots = [(v, k) for v in range(latent.shape[0]) for k in range(latent.shape[1])]
+    n = 0
+    with atomic_path(directory, directory=True) as tmp:
+        for v, k in slots:
+            write_png(Path(tmp) / latent_png_name(v, k), latent[v, k])
+            n += 1
+    return n
 
 
 def parse_latent_png_name(name: str) -> tuple[int, int]:

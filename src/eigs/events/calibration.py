@@ -32,7 +32,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from eigs.events.binning import polarity_counts
-from eigs.events.edi import EXP_CLIP, LOG_EPS, exposure_events, luma, pixel_segments, srgb_to_linear
+from eigs.events.edi import EXP_CLIP, LOG_EPS, exposure_events, luma, pixel_segments
+from eigs.util.image import srgb_to_linear
 
 log = logging.getLogger(__name__)
 

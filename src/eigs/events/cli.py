@@ -1,10 +1,17 @@
-"""``eigs edi SCENE.h5 -o edi.h5``: EDI latent sharp frames (binning, E²NeRF or estimated mode, latent PNGs)."""
+"""``eigs edi SCENE.h5 -o edi.h5``: EDI latent sharp frames (binning, E²NeRF or estimated mode, latent PNGs).
+
+Options: every default lives in :class:`eigs.events.options.EdiOptions`; ``--config JSON`` (the rule's ``edi:``
+config section) sets any of them, and a flag given here wins over it.
+"""
 
 from __future__ import annotations
 
 import argparse
 
+from eigs.events.options import CONFIG_KEYS, DEFAULT_BINS, MODES, SCOPES, EdiOptions
+
 HELP = "EDI latent sharp frames from blurry frames and events (B + 1 per view), with their event integrals"
+_D = EdiOptions()
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -14,62 +21,63 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--latent-dir", metavar="DIR", help="also write the latent frames as 8-bit PNGs vVVVV_kKK.png into DIR"
     )
     parser.add_argument(
-        "--mode",
-        choices=("auto", "estimated", "e2nerf"),
-        default="auto",
-        help="auto (default): e2nerf for scenes ingested from E²NeRF layouts, estimated otherwise",
+        "--config", metavar="JSON", help="options as one JSON object (keys as in the `edi:` config section)"
     )
     parser.add_argument(
-        "--bins", type=int, default=None, metavar="B",
-        help="bins per exposure, B + 1 latent frames (default 4; pre-binned scenes: their own count)",
+        "--mode", choices=MODES,
+        help=f"auto: e2nerf for scenes ingested from E²NeRF layouts, estimated otherwise (default {_D.mode})",
     )
     parser.add_argument(
-        "--threshold", type=float, default=None, metavar="C",
+        "--bins", type=int, metavar="B",
+        help=f"bins per exposure, B + 1 latent frames (default {DEFAULT_BINS}; pre-binned scenes: their own count)",
+    )
+    parser.add_argument(
+        "--threshold", type=float, metavar="C",
         help="contrast threshold (log units) instead of the estimate (e2nerf mode: default 0.3)",
     )
     parser.add_argument(
-        "--threshold-scope", choices=("scene", "view"), default="scene",
-        help="estimate one threshold per scene (default) or one per view",
+        "--threshold-scope", choices=SCOPES,
+        help=f"estimate one threshold per scene or one per view (default {_D.threshold_scope})",
     )
     parser.add_argument(
-        "--mask-top", type=float, default=0.01, metavar="F",
-        help="hot-pixel/flicker mask: fraction of busiest pixels eligible (default 0.01; 0 disables)",
+        "--mask-top", type=float, metavar="F",
+        help=f"hot-pixel/flicker mask: fraction of busiest pixels eligible (default {_D.mask_top}; 0 disables)",
     )
     parser.add_argument(
-        "--mask-factor", type=float, default=8.0, metavar="K",
-        help="…and only those with more than K× the mean events per pixel (default 8)",
+        "--mask-factor", type=float, metavar="K",
+        help=f"…and only those with more than K× the mean events per pixel (default {_D.mask_factor})",
     )
     parser.add_argument(
-        "--per-pixel-threshold", action=argparse.BooleanOptionalAction, default=True,
-        help="estimated mode: calibrate per-pixel ON/OFF thresholds from the events between exposures (default on; "
-        "falls back to the global threshold when the recording has too few gaps with events)",
-    )
+        "--per-pixel-threshold", action=argparse.BooleanOptionalAction, default=None,
+        help="estimated mode: calibrate per-pixel ON/OFF thresholds from the events between exposures (default "
+        f"{'on' if _D.per_pixel_threshold else 'off'}; falls back to the global threshold when the recording has "
+        "too few gaps with events)",
+    )  # fmt: skip
+
+
+def options(args: argparse.Namespace) -> EdiOptions:
+    """:class:`EdiOptions` from the defaults, ``--config`` and the flags given (in that order)."""
+    from eigs.util.options import flags, merge, parse_config_json
+
+    return EdiOptions(**merge(CONFIG_KEYS, parse_config_json(args.config), flags(args, CONFIG_KEYS)))
 
 
 def run(args: argparse.Namespace) -> int:
     import logging
     import time
 
-    from eigs.artifacts.edi import write_edi
-    from eigs.events.pipeline import EdiOptions, compute_edi, write_latent_pngs
+    from eigs.artifacts.edi import write_edi, write_latent_pngs
+    from eigs.events.pipeline import compute_edi
     from eigs.scene import read_scene
 
     log = logging.getLogger("eigs.events")
     t0 = time.perf_counter()
+    opts = options(args)
     scene = read_scene(args.scene)
-    opts = EdiOptions(
-        mode=args.mode,
-        bins=args.bins,
-        threshold=args.threshold,
-        threshold_scope=args.threshold_scope,
-        mask_top=args.mask_top,
-        mask_factor=args.mask_factor,
-        per_pixel_threshold=args.per_pixel_threshold,
-    )
     result = compute_edi(scene, opts, path=args.scene)
     write_edi(result, args.output)
     if args.latent_dir:
-        n = write_latent_pngs(result, args.latent_dir)
+        n = write_latent_pngs(result.latent, args.latent_dir)
         log.info("wrote %d latent PNGs to %s", n, args.latent_dir)
     log.info(
         "%s: mode %s, B = %d, threshold %s (%s), %d sharp views, %.1f s",

@@ -17,24 +17,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from eigs.util.image import linear_to_srgb, srgb_to_linear
+
 EXP_CLIP = 700.0  # |exponent| bound before exp() in float64 (exp(700) ≈ 1e304, finite)
 LOG_EPS = 1e-3  # ε of the log-intensity model ln(Y + ε), Y linear in [0, 1] (the synthetic simulator's value)
 E2NERF_C = 0.3  # E²NeRF's fixed contrast threshold
 
 
 # -------------------------------------------------------------------------------------------- domains
-def srgb_to_linear(v: np.ndarray) -> np.ndarray:
-    """sRGB-encoded values in [0, 1] → linear intensity in [0, 1] (IEC 61966-2-1), float64."""
-    v = np.asarray(v, dtype=np.float64)
-    return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
-
-
-def linear_to_srgb(v: np.ndarray) -> np.ndarray:
-    """Linear intensity in [0, 1] → sRGB-encoded values in [0, 1], float64."""
-    v = np.clip(np.asarray(v, dtype=np.float64), 0.0, 1.0)
-    return np.where(v <= 0.0031308, v * 12.92, 1.055 * v ** (1 / 2.4) - 0.055)
-
-
 def to_linear(image_u8: np.ndarray, response: str) -> np.ndarray:
     """uint8 frame → float64 linear intensity in [0, 1]. ``response``: ``linear`` or ``unknown`` (taken as linear,
     like a raw APS readout) or ``srgb``."""

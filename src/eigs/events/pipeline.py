@@ -9,13 +9,11 @@ latent frames and store them in the scene's pixel domain.
 from __future__ import annotations
 
 import logging
-import os
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
-from eigs.artifacts.edi import EdiResult, latent_png_name
+from eigs.artifacts.edi import EdiResult
 from eigs.errors import EigsError
 from eigs.events import binning
 from eigs.events import calibration as cal
@@ -31,30 +29,15 @@ from eigs.events.edi import (
     from_linear,
     to_linear,
 )
+from eigs.events.options import DEFAULT_BINS, MODES, SCOPES, EdiOptions
 from eigs.scene.model import Scene
-from eigs.util.atomic import atomic_path
 from eigs.util.progress import progress
 
 log = logging.getLogger(__name__)
 
 SHARP_EVENTS_PER_PIXEL = 0.01  # views below this many events per pixel over the exposure are copied
 SEARCH_VIEWS = 12  # at most this many (evenly spaced) views enter the scene-scope threshold energy
-DEFAULT_BINS = 4
 FALLBACK_C = 0.2  # threshold when nothing can be estimated (no view has events)
-MODES = ("auto", "estimated", "e2nerf")
-SCOPES = ("scene", "view")
-
-
-@dataclass
-class EdiOptions:
-    mode: str = "auto"
-    bins: int | None = None  # None: 4, or the scene's bins when pre-binned
-    threshold: float | None = None  # None: estimated (estimated mode) / 0.3 (e2nerf mode)
-    threshold_scope: str = "scene"
-    mask_top: float = mask_mod.TOP_FRACTION  # 0 disables the hot-pixel mask
-    mask_factor: float = mask_mod.FACTOR
-    per_pixel_threshold: bool = True  # estimated mode: calibrate per-pixel ON/OFF thresholds from the gap events
-    show_progress: bool = True
 
 
 def is_e2nerf_scene(scene: Scene) -> bool:
@@ -491,20 +474,3 @@ def _eval_maps_binned(counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     if nb == 1:
         return cum, np.concatenate([c, c])
     return cum[1:nb], c[:-1] + c[1:]
-
-
-def write_latent_pngs(result: EdiResult, directory: str | os.PathLike) -> int:
-    """Write every latent frame as an 8-bit PNG ``latent_png_name(v, k)`` into ``directory`` (atomically, replacing
-    it). Returns the number of files."""
-    import cv2
-
-    n = 0
-    with atomic_path(directory, directory=True) as tmp:
-        for v in range(result.n_views):
-            for k in range(result.n_bins + 1):
-                img = np.rint(np.clip(result.latent[v, k], 0.0, 1.0) * 255.0).astype(np.uint8)
-                img = img[..., 0] if img.shape[-1] == 1 else cv2.cvtColor(img, cv2.COLOR_RGB2BGR)
-                if not cv2.imwrite(str(Path(tmp) / latent_png_name(v, k)), img):
-                    raise EigsError(directory, f"could not write {latent_png_name(v, k)}")
-                n += 1
-    return n

@@ -8,6 +8,7 @@ from pathlib import Path
 HELP = "image-quality metric (psnr, ssim, lpips, brisque) of an image or a directory of images"
 METRICS = ("psnr", "ssim", "lpips", "brisque")
 FULL_REFERENCE = ("psnr", "ssim", "lpips")
+BRISQUE_KINDS = {"original": "brisque", "opencv": "brisque_opencv"}  # variant → resource kind
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -42,7 +43,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=Path,
         default=None,
         metavar="DIR",
-        help="model files made by `eigs resources` (default: the repository's resources/)",
+        help="model files (default: the repository's resources/); made there on first use like `eigs resources`",
     )
     parser.add_argument("--csv", type=Path, default=None, metavar="FILE", help="also write the per-image CSV here")
 
@@ -103,6 +104,10 @@ def run(args: argparse.Namespace) -> int:
     if args.metric == "brisque" and args.reference is not None:
         raise EigsError(args.reference, "brisque is a no-reference metric; give only IMAGE")
     pairs = _pairs(args.image, args.reference)
+    if args.metric in ("lpips", "brisque"):  # model files: made on first use (pinned, checksummed)
+        from eigs.metrics.resources import ensure
+
+        ensure("lpips" if args.metric == "lpips" else BRISQUE_KINDS[args.brisque_variant], args.resources)
 
     if args.metric == "psnr":
         from eigs.metrics.pixel import psnr as fn

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from eigs.errors import EigsError
+from eigs.util.image import to_uint8 as util_to_uint8
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".ppm", ".pgm")
 
@@ -58,11 +59,12 @@ def to_float(img: np.ndarray, name: str = "image") -> np.ndarray:
 
 
 def to_uint8(img: np.ndarray, name: str = "image") -> np.ndarray:
-    """``(H, W, C)`` uint8, C in {1, 3}: uint8 as is, others via :func:`to_float` and ``round(255 v)``."""
+    """``(H, W, C)`` uint8, C in {1, 3}: uint8 as is, others via :func:`to_float` and the one rounding rule of
+    :func:`eigs.util.image.to_uint8` (⌊255 v + 0.5⌋)."""
     arr = _as_hwc(img, name)
     if arr.dtype == np.uint8:
         return np.ascontiguousarray(arr)
-    return np.round(to_float(arr, name) * 255.0).astype(np.uint8)
+    return util_to_uint8(to_float(arr, name))
 
 
 def match_channels(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -102,7 +104,7 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
     if img is None:
         raise EigsError(path, "cannot decode this file as an image")
     if img.dtype == np.uint16:
-        img = np.round(img.astype(np.float64) / 257.0).astype(np.uint8)
+        img = util_to_uint8(img.astype(np.float64) / 65535.0)  # = round(v / 257): never a tie for integers
     elif img.dtype != np.uint8:
         raise EigsError(path, f"unsupported pixel type {img.dtype}; save the image with 8 bits per channel")
     if img.ndim == 2:

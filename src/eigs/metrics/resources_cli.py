@@ -23,7 +23,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--only", choices=KINDS, default=None, help="prepare one model only")
     parser.add_argument("--force", action="store_true", help="rebuild even when the files are valid")
     parser.add_argument(
-        "--cache", type=Path, default=None, help="download cache (default: $EIGS_CACHE or ~/.cache/eigs)"
+        "--cache",
+        type=Path,
+        default=None,
+        help="download cache (default: $EIGS_CACHE_DIR, else $XDG_CACHE_HOME/eigs, else ~/.cache/eigs)",
     )
 
 

@@ -1,6 +1,7 @@
 """Build and load the C++ rasterizer extension (JIT on first use, cached by a hash of sources and flags).
 
-The build directory is ``$EIGS_CACHE_DIR/torch_extensions/<name>`` (default ``~/.cache/eigs``), where the name
+The build directory is ``<cache>/torch_extensions/<name>`` (:func:`eigs.util.cache.cache_dir`: ``$EIGS_CACHE_DIR``,
+else ``$XDG_CACHE_HOME/eigs``, else ``~/.cache/eigs``), where the name
 carries a hash of the C++ sources, the compiler flags and the torch version, so an edit rebuilds and a cached
 build loads in well under a second. A build failure raises :class:`eigs.errors.EigsError` naming the compiler
 error.
@@ -9,13 +10,13 @@ error.
 from __future__ import annotations
 
 import hashlib
-import os
 import re
 import threading
 from pathlib import Path
 from types import ModuleType
 
 from eigs.errors import EigsError
+from eigs.util.cache import cache_dir
 
 CSRC = Path(__file__).resolve().parent / "csrc"
 SOURCES = ("autograd.cpp", "ops.cpp", "projection.cpp", "rasterize_fwd.cpp", "rasterize_bwd.cpp")
@@ -30,12 +31,6 @@ ISA_CODES = {"auto": 0, "baseline": 1, "avx2": 2, "avx512": 3}
 
 _lock = threading.Lock()
 _module: ModuleType | None = None
-
-
-def cache_dir() -> Path:
-    """Root of eigs's build caches: ``$EIGS_CACHE_DIR`` or ``~/.cache/eigs``."""
-    root = os.environ.get("EIGS_CACHE_DIR")
-    return Path(root) if root else Path.home() / ".cache" / "eigs"
 
 
 def source_hash() -> str:

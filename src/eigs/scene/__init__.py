@@ -1,6 +1,6 @@
 """The scene file (HDF5, version 2; reads version 1): model, reader, writer, validation. See docs/scene-format.md."""
 
-from eigs.scene.io import SceneWriter, event_count, has_raw_events, read_events, read_scene, write_scene
+from eigs.scene.file import SceneWriter, event_count, has_raw_events, read_events, read_scene, write_scene
 from eigs.scene.model import (
     SHARP_KIND_BLUR_VIEW,
     SHARP_KIND_NOVEL_VIEW,

@@ -1,10 +1,17 @@
-"""``eigs sfm``: camera poses for every latent frame (COLMAP or given), test cameras, accuracy report."""
+"""``eigs sfm``: camera poses for every latent frame (COLMAP or given), test cameras, accuracy report.
+
+Options: every default lives in :class:`eigs.sfm.options.SfmConfig` / :class:`~eigs.sfm.options.ColmapOptions`;
+``--config JSON`` (the rule's ``sfm:`` config section) sets any of them, and a flag given here wins over it.
+"""
 
 from __future__ import annotations
 
 import argparse
 
+from eigs.sfm.options import MATCHERS, MODES, SFM_CONFIG_KEYS, ColmapOptions, SfmConfig
+
 HELP = "camera poses of the EDI latent frames (COLMAP or given poses), test cameras and an accuracy report"
+_D, _C = SfmConfig(), ColmapOptions()
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -12,65 +19,63 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("edi", help="EDI artifact (b{B}/edi.h5)")
     p.add_argument("-o", "--output", required=True, help="output directory (sfm/), written atomically")
     p.add_argument("--latent-dir", help="latent PNGs (default: latent/ beside EDI.h5; written from it if absent)")
+    p.add_argument("--config", metavar="JSON", help="options as one JSON object (keys as in the `sfm:` config section)")
     p.add_argument(
         "--mode",
-        choices=("auto", "colmap", "given"),
-        default="auto",
-        help="auto: given when the scene's latent poses are ground truth (and allowed), else colmap",
+        choices=MODES,
+        help=f"auto: given when the scene's latent poses are ground truth (and allowed), else colmap "
+        f"(default {_D.mode})",
     )
-    p.add_argument("--no-given", action="store_true", help="auto mode never picks given poses")
-    p.add_argument("--matcher", choices=("auto", "exhaustive", "sequential"), default="auto",
-                   help="auto: exhaustive up to 150 images, else sequential + spatial")  # fmt: skip
-    p.add_argument("--global-mapping", action="store_true", help="global (GLOMAP) instead of incremental mapping")
-    p.add_argument("--refine-intrinsics", action="store_true", help="let bundle adjustment refine the focal length")
+    p.add_argument("--no-given", dest="allow_given", action="store_const", const=False,
+                   help="auto mode never picks given poses")  # fmt: skip
+    p.add_argument("--matcher", choices=MATCHERS, help="auto: exhaustive up to 150 images, else sequential + "
+                   f"spatial (default {_C.matcher})")  # fmt: skip
+    p.add_argument("--global-mapping", action="store_const", const=True,
+                   help="global (GLOMAP) instead of incremental mapping")  # fmt: skip
+    p.add_argument("--refine-intrinsics", action="store_const", const=True,
+                   help="let bundle adjustment refine the focal length")  # fmt: skip
     p.add_argument(
         "--min-registered-fraction",
         type=float,
-        default=0.5,
         metavar="F",
-        help="stop when fewer than this fraction of latent frames register (default 0.5)",
+        help=f"stop when fewer than this fraction of latent frames register (default {_D.min_registered_fraction})",
     )
-    p.add_argument(
-        "--no-interpolate", action="store_true", help="leave unregistered latents NaN instead of interpolating"
-    )
-    p.add_argument("--no-register-test", action="store_true", help="test cameras from the Sim(3) only")
-    p.add_argument("--feature-scale", type=int, default=None, metavar="F", help="SIFT upsampling (default auto)")
-    p.add_argument("--max-features", type=int, default=8192, metavar="N", help="SIFT features per image")
-    p.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto", help="pycolmap device")
-    p.add_argument("--seed", type=int, default=0, help="random seed of COLMAP's RANSAC and mapper")
+    p.add_argument("--no-interpolate", dest="interpolate_unregistered", action="store_const", const=False,
+                   help="leave unregistered latents NaN instead of interpolating")  # fmt: skip
+    p.add_argument("--no-register-test", dest="register_test_cameras", action="store_const", const=False,
+                   help="test cameras from the Sim(3) only")  # fmt: skip
+    p.add_argument("--feature-scale", type=int, metavar="F", help="SIFT upsampling (default auto)")
+    p.add_argument("--max-features", dest="max_num_features", type=int, metavar="N",
+                   help=f"SIFT features per image (default {_C.max_num_features})")  # fmt: skip
+    p.add_argument("--device", choices=("auto", "cpu", "cuda"), help=f"pycolmap device (default {_C.device})")
+    p.add_argument("--seed", type=int, help=f"random seed of COLMAP's RANSAC and mapper (default {_C.seed})")
     p.add_argument("--keep-work", action="store_true", help="keep the database and scratch files in OUT/work")
     p.add_argument("--no-plot", action="store_true", help="skip report.png")
 
 
-def run(args: argparse.Namespace) -> int:
+def options(args: argparse.Namespace) -> SfmConfig:
+    """:class:`SfmConfig` from the defaults, ``--config`` and the flags given (in that order)."""
     import os
 
     from eigs.errors import EigsError
-    from eigs.sfm.colmap import ColmapOptions
-    from eigs.sfm.run import SfmConfig, run_sfm
+    from eigs.sfm.options import sfm_config
+    from eigs.util.options import flags, merge, parse_config_json
 
-    if not 0.0 <= args.min_registered_fraction <= 1.0:
-        raise EigsError(None, f"--min-registered-fraction must lie in [0, 1], got {args.min_registered_fraction}")
-    threads = args.threads or min(2, os.cpu_count() or 1)
-    cfg = SfmConfig(
-        mode=args.mode,
-        allow_given=not args.no_given,
-        min_registered_fraction=args.min_registered_fraction,
-        interpolate_unregistered=not args.no_interpolate,
-        register_test=not args.no_register_test,
+    values = merge(SFM_CONFIG_KEYS, parse_config_json(args.config), flags(args, SFM_CONFIG_KEYS))
+    cfg = sfm_config(
+        values,
         keep_work=args.keep_work,
         verbose=args.verbose,
         plot=not args.no_plot,
-        colmap=ColmapOptions(
-            matcher=args.matcher,
-            global_mapping=args.global_mapping,
-            refine_intrinsics=args.refine_intrinsics,
-            feature_scale=args.feature_scale,
-            max_num_features=args.max_features,
-            num_threads=threads,
-            device=args.device,
-            seed=args.seed,
-        ),
+        num_threads=args.threads or min(2, os.cpu_count() or 1),
     )
-    run_sfm(args.scene, args.edi, args.output, latent_dir=args.latent_dir, cfg=cfg)
+    if not 0.0 <= cfg.min_registered_fraction <= 1.0:
+        raise EigsError(None, f"--min-registered-fraction must lie in [0, 1], got {cfg.min_registered_fraction}")
+    return cfg
+
+
+def run(args: argparse.Namespace) -> int:
+    from eigs.sfm.run import run_sfm
+
+    run_sfm(args.scene, args.edi, args.output, latent_dir=args.latent_dir, cfg=options(args))
     return 0

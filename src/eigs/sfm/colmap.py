@@ -17,33 +17,13 @@ from pathlib import Path
 import numpy as np
 
 from eigs.errors import EigsError
+from eigs.sfm.options import ColmapOptions
+from eigs.util.image import to_uint8
 
 log = logging.getLogger(__name__)
 
 EXHAUSTIVE_MAX_IMAGES = 150  # beyond this, sequential + spatial matching
 FEATURE_TARGET_PX = 256  # upsample until the longer side reaches this (integer factor ≤ 4)
-
-
-@dataclass
-class ColmapOptions:
-    """Options of the COLMAP steps. ``matcher``: auto | exhaustive | sequential; ``feature_scale``: None for
-    automatic; ``device``: auto | cpu | cuda."""
-
-    matcher: str = "auto"
-    global_mapping: bool = False
-    refine_intrinsics: bool = False
-    feature_scale: int | None = None
-    max_num_features: int = 8192
-    sequential_overlap: int | None = None  # default: 3 views' worth of latent images
-    num_threads: int = 2
-    device: str = "auto"
-    seed: int = 0
-    enhance: bool = True  # contrast-stretch dark frames for SIFT
-    # Incremental mapper on small (upsampled) frames: reprojection thresholds in original pixels. COLMAP's
-    # defaults (4 px; 12 px for absolute pose) suit megapixel images; on 128×96 frames they admitted wrong
-    # registrations that folded or bent the orbit (see docs/sfm.md).
-    small_max_error_px: float = 1.0
-    small_abs_pose_max_error_px: float = 2.0
 
 
 def load_pycolmap():
@@ -150,7 +130,7 @@ def enhance_for_features(im: np.ndarray) -> np.ndarray:
     med = float(np.median(y))
     if 0.05 < med < 0.3:
         y = y ** (np.log(0.4) / np.log(med))
-    return (y * 255.0 + 0.5).astype(np.uint8)
+    return to_uint8(y)
 
 
 def _feature_copies(src_dir: Path, names: Sequence[str], dst_dir: Path, f: int, enhance: bool) -> None:
@@ -163,7 +143,7 @@ def _feature_copies(src_dir: Path, names: Sequence[str], dst_dir: Path, f: int, 
         if im is None:
             raise EigsError(src_dir / name, "cannot read image")
         if im.dtype != np.uint8:
-            im = (im.astype(np.float64) / np.iinfo(im.dtype).max * 255.0 + 0.5).astype(np.uint8)
+            im = to_uint8(im.astype(np.float64) / np.iinfo(im.dtype).max)
         if enhance:
             im = enhance_for_features(im)
         if f > 1:

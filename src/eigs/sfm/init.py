@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from eigs.artifacts.gaussians import GaussianCloud, logit, rgb_to_sh_dc
+from eigs.sfm.options import InitOptions
 
 log = logging.getLogger(__name__)
 
@@ -90,10 +91,10 @@ def initialize(
     rgb: np.ndarray,
     camera_centres: np.ndarray,
     *,
-    min_points: int = 1000,
-    n_random: int = 10_000,
-    sh_degree: int = 3,
-    seed: int = 0,
+    min_points: int = InitOptions.min_points,
+    n_random: int = InitOptions.random,
+    sh_degree: int = InitOptions.sh_degree,
+    seed: int = InitOptions.seed,
 ) -> InitResult:
     """Gaussians from SfM points ``xyz`` (N, 3) / ``rgb`` (N, 3) in [0, 1]; when N < ``min_points``, add
     ``n_random`` random Gaussians inside :func:`scene_bounds` (``camera_centres`` (M, 3) bound them when the

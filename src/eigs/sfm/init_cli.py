@@ -1,25 +1,43 @@
-"""``eigs init``: initial Gaussians (3DGS PLY) from the SfM points."""
+"""``eigs init``: initial Gaussians (3DGS PLY) from the SfM points.
+
+Options: every default lives in :class:`eigs.sfm.options.InitOptions`; ``--config JSON`` (the rule's ``init:``
+config section) sets any of them, and a flag given here wins over it.
+"""
 
 from __future__ import annotations
 
 import argparse
 
+from eigs.sfm.options import INIT_CONFIG_KEYS, InitOptions
+
 HELP = "initial Gaussians from the SfM points, written as a standard 3DGS PLY"
+_D = InitOptions()
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("sfm", help="SfM output directory (sfm/ with points3D.bin and poses.h5)")
     p.add_argument("-o", "--output", required=True, help="output PLY (init.ply)")
     p.add_argument(
+        "--config", metavar="JSON", help="options as one JSON object (keys as in the `init:` config section)"
+    )
+    p.add_argument(
         "--min-points",
         type=int,
-        default=1000,
         metavar="N",
-        help="with fewer SfM points, add random Gaussians in the scene bounds (default 1000)",
+        help=f"with fewer SfM points, add random Gaussians in the scene bounds (default {_D.min_points})",
     )
-    p.add_argument("--random", type=int, default=10_000, metavar="N", help="random Gaussians added (default 10000)")
-    p.add_argument("--sh-degree", type=int, default=3, choices=range(0, 5), metavar="D", help="SH degree (default 3)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the random Gaussians")
+    p.add_argument("--random", type=int, metavar="N", help=f"random Gaussians added (default {_D.random})")
+    p.add_argument(
+        "--sh-degree", type=int, choices=range(0, 5), metavar="D", help=f"SH degree (default {_D.sh_degree})"
+    )
+    p.add_argument("--seed", type=int, help=f"seed of the random Gaussians (default {_D.seed})")
+
+
+def options(args: argparse.Namespace) -> InitOptions:
+    """:class:`InitOptions` from the defaults, ``--config`` and the flags given (in that order)."""
+    from eigs.util.options import flags, merge, parse_config_json
+
+    return InitOptions(**merge(INIT_CONFIG_KEYS, parse_config_json(args.config), flags(args, INIT_CONFIG_KEYS)))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -34,6 +52,7 @@ def run(args: argparse.Namespace) -> int:
     from eigs.sfm.init import initialize
 
     log = logging.getLogger("eigs.sfm.init")
+    opts = options(args)
     sfm = Path(args.sfm)
     if not (sfm / "points3D.bin").is_file():
         raise EigsError(sfm, "no points3D.bin (not an sfm/ output directory; run `eigs sfm` first)")
@@ -50,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
     poses = read_poses(sfm)
     centres = poses.c2w[..., :3, 3].reshape(-1, 3)
     res = initialize(
-        xyz, rgb, centres, min_points=args.min_points, n_random=args.random, sh_degree=args.sh_degree, seed=args.seed
+        xyz, rgb, centres, min_points=opts.min_points, n_random=opts.random, sh_degree=opts.sh_degree, seed=opts.seed
     )
     write_gaussian_ply(res.cloud, args.output)
     log.info("wrote %s: %d Gaussians (%d from SfM points, %d random)", args.output, len(res.cloud), res.n_sfm,

@@ -12,34 +12,15 @@ import logging
 import os
 import shutil
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from eigs.errors import EigsError
-from eigs.sfm.colmap import ColmapOptions
+from eigs.sfm.options import MODES, ColmapOptions, SfmConfig
 
 log = logging.getLogger(__name__)
-
-MODES = ("auto", "colmap", "given")
-
-
-@dataclass
-class SfmConfig:
-    """Stage options. ``min_registered_fraction``: of the images given to COLMAP, below which the stage stops;
-    ``interpolate_unregistered``: fill unregistered latents from registered latents of the same view."""
-
-    mode: str = "auto"
-    allow_given: bool = True
-    min_registered_fraction: float = 0.5
-    interpolate_unregistered: bool = True
-    register_test: bool = True
-    keep_work: bool = False
-    verbose: bool = False
-    plot: bool = True
-    colmap: ColmapOptions = field(default_factory=ColmapOptions)
-
 
 class _Timer:
     def __init__(self) -> None:
@@ -57,20 +38,6 @@ class _Timer:
                 timer.times[name] = round(time.perf_counter() - self.t0, 3)
 
         return _Ctx()
-
-
-def _write_png(path: Path, image: np.ndarray) -> None:
-    import cv2
-
-    im = np.asarray(image)
-    if im.dtype != np.uint8:
-        im = (np.clip(im, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
-    if im.ndim == 3 and im.shape[2] == 3:
-        im = cv2.cvtColor(im, cv2.COLOR_RGB2BGR)
-    elif im.ndim == 3:
-        im = im[..., 0]
-    if not cv2.imwrite(str(path), im):
-        raise EigsError(path, "cannot write image")
 
 
 def resolve_mode(cfg: SfmConfig, scene, path: str) -> tuple[str, str]:
@@ -191,10 +158,10 @@ def run_sfm(
 def _read_inputs(scene_path: Path, edi_path: Path, timer: _Timer):
     """The scene (without events) and the EDI result (without latent frames); checks they agree."""
     from eigs.artifacts.edi import read_edi
-    from eigs.scene import io as scene_io
+    from eigs.scene import read_scene
 
     with timer("read inputs"):
-        scene = scene_io.read_scene(scene_path, events=False)
+        scene = read_scene(scene_path, events=False)
         edi = read_edi(edi_path, latent=False)
     if edi.n_views != scene.n_views:
         raise EigsError(edi_path, f"EDI has {edi.n_views} views but the scene {scene.n_views} (rerun edi)")
@@ -208,17 +175,13 @@ def _latent_images(latent_dir, edi_path: Path, lat: _Latents, cam, work: Path) -
     else written from the EDI file into ``work/latent``. Checks the image size against the camera."""
     import cv2
 
-    from eigs.artifacts.edi import read_edi
+    from eigs.artifacts.edi import read_edi, write_latent_pngs
 
     ldir = Path(latent_dir) if latent_dir is not None else edi_path.parent / "latent"
     if not all((ldir / n).is_file() for n in lat.names):
         log.info("latent PNGs not found in %s: writing them from %s", ldir, edi_path)
-        full = read_edi(edi_path)
         ldir = work / "latent"
-        ldir.mkdir()
-        for (v, k), n in zip(lat.slots, lat.names, strict=True):
-            _write_png(ldir / n, full.latent[v, k])
-        del full
+        write_latent_pngs(read_edi(edi_path).latent, ldir, lat.slots)
     probe = cv2.imread(str(ldir / lat.names[0]), cv2.IMREAD_UNCHANGED)
     if probe is None or probe.shape[:2] != (cam.height, cam.width):
         got = "unreadable" if probe is None else f"{probe.shape[1]}×{probe.shape[0]}"
@@ -562,12 +525,14 @@ def _test_cameras(scene, rec, db, work, mode, canon, est_to_gt, cfg, opts):
     summary: dict = {"count": S}
     if mode == "given":
         method[:] = METHOD_GIVEN
-    elif cfg.register_test:
+    elif cfg.register_test_cameras:
+        from eigs.util.image import write_png
+
         tdir = work / "test"
         tdir.mkdir()
         tnames = [f"test_{i:04d}.png" for i in range(S)]
         for i, n in enumerate(tnames):
-            _write_png(tdir / n, sh.images[i])
+            write_png(tdir / n, sh.images[i])
         from eigs.sfm.register import register_images
 
         regs = register_images(

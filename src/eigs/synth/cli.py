@@ -11,7 +11,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scene", metavar="NAME", help="built-in scene name (see --list)")
     parser.add_argument("--list", action="store_true", help="list the built-in scenes and their parameters, exit")
     parser.add_argument(
-        "--config", metavar="FILE.yaml", help="YAML mapping of scene parameters (same keys as --overrides)"
+        "--config",
+        metavar="JSON|FILE.yaml",
+        help="scene parameters as one JSON object (what the rule passes: the scene's `overrides:`) or a YAML file",
     )
     parser.add_argument(
         "--overrides",
@@ -47,7 +49,11 @@ def _load_overrides(args: argparse.Namespace) -> list[tuple[str, dict | None]]:
     from eigs.errors import EigsError
 
     layers: list[tuple[str, dict | None]] = []
-    if args.config:
+    if args.config and args.config.lstrip().startswith("{"):
+        from eigs.util.options import parse_config_json
+
+        layers.append(("--config", parse_config_json(args.config)))
+    elif args.config:
         import yaml
 
         p = Path(args.config)

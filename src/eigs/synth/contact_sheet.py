@@ -11,19 +11,19 @@ import os
 import numpy as np
 
 from eigs.scene import Scene
+from eigs.util.image import linear_to_srgb, to_uint8, write_png
 
 EVENT_SATURATION = 8.0
 
 
 def _display(img_u8: np.ndarray, response: str) -> np.ndarray:
     from eigs.synth.generate import decode
-    from eigs.synth.textures import linear_to_srgb
 
     lin = decode(img_u8, response)
     out = linear_to_srgb(lin) if response != "srgb" else np.asarray(img_u8) / 255.0
     if out.shape[-1] == 1:
         out = np.repeat(out, 3, axis=-1)
-    return (np.clip(out, 0, 1) * 255 + 0.5).astype(np.uint8)
+    return to_uint8(out)
 
 
 def event_image(x: np.ndarray, y: np.ndarray, p: np.ndarray, width: int, height: int) -> np.ndarray:
@@ -36,7 +36,7 @@ def event_image(x: np.ndarray, y: np.ndarray, p: np.ndarray, width: int, height:
     img[..., 1] -= pos + neg
     img[..., 2] -= pos
     img[..., 0] -= neg
-    return (np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8)
+    return to_uint8(img)
 
 
 def _pick(n: int, k: int) -> list[int]:
@@ -90,12 +90,4 @@ def contact_sheet(scene: Scene, *, max_columns: int = 8, min_tile_width: int = 1
 
 def write_contact_sheet(scene: Scene, path: str | os.PathLike, **kw) -> None:
     """Write :func:`contact_sheet` as a PNG (atomically)."""
-    import cv2
-
-    from eigs.errors import EigsError
-    from eigs.util.atomic import atomic_path
-
-    img = contact_sheet(scene, **kw)
-    with atomic_path(path) as tmp:
-        if not cv2.imwrite(str(tmp), img[..., ::-1]):
-            raise EigsError(path, "could not write the contact sheet PNG")
+    write_png(path, contact_sheet(scene, **kw))

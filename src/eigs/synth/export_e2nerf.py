@@ -37,6 +37,7 @@ import numpy as np
 
 from eigs.errors import EigsError
 from eigs.scene import Scene
+from eigs.util.image import write_png
 
 log = logging.getLogger(__name__)
 
@@ -65,10 +66,12 @@ def _pose_fn(source: Any, scene: Scene):
     return lambda t: interpolate_poses(np.asarray(t), t_all[keep], c_all[keep])
 
 
-def bin_events(
+def e2nerf_event_bins(
     scene: Scene, edges_us: np.ndarray, first_edge_us: np.ndarray | None = None
 ) -> np.ndarray:
-    """Signed net counts (V, B, H·W) float64 of the scene's raw events in bins [edges[v,k], edges[v,k+1]).
+    """E²NeRF's ``events.pt`` layout: signed net counts (V, B, H·W) float64 of the whole scene's raw events in
+    bins [edges[v,k], edges[v,k+1]) (not :func:`eigs.events.binning.bin_events`, which bins one view's events
+    into (B, H, W) int32 for EDI).
 
     ``edges_us``: (V, B + 1) int64 increasing; ``first_edge_us``: optional (V,) replacement for edges[:, 0]
     (to widen bin 0 backwards)."""
@@ -96,13 +99,6 @@ def _rgba(img: np.ndarray) -> np.ndarray:
         img = np.repeat(img, 3, axis=-1)
     alpha = np.full(img.shape[:-1] + (1,), 255, np.uint8)
     return np.concatenate([img, alpha], axis=-1)
-
-
-def _write_png(path: Path, rgba: np.ndarray) -> None:
-    import cv2
-
-    if not cv2.imwrite(str(path), rgba[..., [2, 1, 0, 3]]):
-        raise EigsError(path, "could not write PNG")
 
 
 def write_e2nerf_synthetic(
@@ -151,7 +147,7 @@ def write_e2nerf_synthetic(
         raise EigsError(out_dir, f"no blur-view ground truth for view(s) {missing[:5]}")
 
     first_edge = np.rint(starts - delta).astype(np.int64) if include_pre_latent else None
-    counts = bin_events(scene, latent_t, first_edge)
+    counts = e2nerf_event_bins(scene, latent_t, first_edge)
     edges = latent_t.astype(np.int64).copy()
     if first_edge is not None:
         edges[:, 0] = first_edge
@@ -193,10 +189,10 @@ def write_e2nerf_synthetic(
         for name, frames in (("transform_train.json", train_frames), ("transform_test.json", test_frames)):
             (tmp / name).write_text(json.dumps({"camera_angle_x": angle_x, "frames": frames, "eigs": ext}))
         for i in range(n_views):
-            _write_png(tmp / "train" / f"r_{2 * i}.png", _rgba(scene.frames.blurry[i]))
+            write_png(tmp / "train" / f"r_{2 * i}.png", _rgba(scene.frames.blurry[i]))
         for k in range(n_pairs):
-            _write_png(tmp / "test" / f"r_{2 * k}.png", _rgba(sh.images[blur_gt[k]]))
-            _write_png(tmp / "test" / f"r_{2 * k + 1}.png", _rgba(sh.images[novel[k]]))
+            write_png(tmp / "test" / f"r_{2 * k}.png", _rgba(sh.images[blur_gt[k]]))
+            write_png(tmp / "test" / f"r_{2 * k + 1}.png", _rgba(sh.images[novel[k]]))
         torch.save(torch.from_numpy(counts), tmp / "events.pt")
     log.info("wrote E²NeRF synthetic layout to %s (%d views, %d test frames)", out_dir, n_views, 2 * n_pairs)
     return {"n_views": n_views, "n_test": 2 * n_pairs, "bin_edges_us": edges, "matrix_times_us": mat_t}

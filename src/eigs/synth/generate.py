@@ -32,8 +32,8 @@ from eigs.scene import (
 from eigs.synth.raycast import RayCaster
 from eigs.synth.scenes import SceneSpec, get_spec, resolve_params
 from eigs.synth.simulator import EventChunk, EventSimulator, SensorParams, log_luma
-from eigs.synth.textures import linear_to_srgb
 from eigs.synth.trajectory import CameraPath, Orbit, Shake, Timeline, spiral_orbit
+from eigs.util.image import linear_to_srgb, srgb_to_linear, to_uint8
 from eigs.util.progress import progress
 
 log = logging.getLogger(__name__)
@@ -68,15 +68,11 @@ def intrinsics(width: int, height: int, fov_deg: float) -> np.ndarray:
 def encode(linear: np.ndarray, response: str) -> np.ndarray:
     """Linear intensity (any shape, [0, 1]) → uint8: round(255·x) (``linear``) or round(255·sRGB(x)) (``srgb``)."""
     x = np.clip(np.asarray(linear, dtype=np.float64), 0.0, 1.0)
-    if response == "srgb":
-        x = linear_to_srgb(x)
-    return np.floor(x * 255.0 + 0.5).astype(np.uint8)
+    return to_uint8(linear_to_srgb(x) if response == "srgb" else x)
 
 
 def decode(u8: np.ndarray, response: str) -> np.ndarray:
     """Inverse of :func:`encode` up to quantisation: uint8 → float64 linear intensity in [0, 1]."""
-    from eigs.synth.textures import srgb_to_linear
-
     x = np.asarray(u8, dtype=np.float64) / 255.0
     return srgb_to_linear(x) if response == "srgb" else x
 

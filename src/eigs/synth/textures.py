@@ -12,6 +12,7 @@ from functools import lru_cache
 import numpy as np
 
 from eigs.errors import EigsError
+from eigs.util.image import srgb_to_linear
 
 # name -> (skimage.data function, colour photo?). All of these ship in the wheel (skimage/data/*.png|jpg).
 _SOURCES: dict[str, str] = {
@@ -32,18 +33,6 @@ _SOURCES: dict[str, str] = {
     "text": "text",
 }
 TEXTURE_NAMES: tuple[str, ...] = tuple(sorted(_SOURCES))
-
-
-def srgb_to_linear(x: np.ndarray) -> np.ndarray:
-    """IEC 61966-2-1 sRGB decoding. ``x``: any shape, values in [0, 1] → linear intensity in [0, 1]."""
-    x = np.clip(x, 0.0, 1.0)
-    return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4)
-
-
-def linear_to_srgb(x: np.ndarray) -> np.ndarray:
-    """Inverse of :func:`srgb_to_linear`. ``x``: linear intensity in [0, 1] → sRGB-encoded [0, 1]."""
-    x = np.clip(x, 0.0, 1.0)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
 
 
 def _load_raw(name: str) -> np.ndarray:

@@ -1,0 +1,91 @@
+"""Options of the ``sfm`` and ``init`` stages: :class:`SfmConfig` (with :class:`ColmapOptions`) and
+:class:`InitOptions` hold every default; the config schema, the rules and the CLIs take theirs from here (see
+``eigs.util.options``). No heavy imports: the CLIs read it for their help text."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+from eigs.errors import EigsError
+
+MODES = ("auto", "colmap", "given")
+MATCHERS = ("auto", "exhaustive", "sequential")
+
+
+@dataclass
+class ColmapOptions:
+    """Options of the COLMAP steps. ``matcher``: auto (exhaustive up to 150 images, else sequential + spatial)
+    | exhaustive | sequential; ``global_mapping``: GLOMAP instead of incremental mapping; ``refine_intrinsics``:
+    let bundle adjustment refine the focal length; ``feature_scale``: SIFT upsampling, None for automatic;
+    ``device``: auto | cpu | cuda; ``seed``: of COLMAP's RANSAC and mapper."""
+
+    matcher: str = "auto"
+    global_mapping: bool = False
+    refine_intrinsics: bool = False
+    feature_scale: int | None = None
+    max_num_features: int = 8192
+    sequential_overlap: int | None = None  # default: 3 views' worth of latent images
+    num_threads: int = 2
+    device: str = "auto"
+    seed: int = 0
+    enhance: bool = True  # contrast-stretch dark frames for SIFT
+    # Incremental mapper on small (upsampled) frames: reprojection thresholds in original pixels. COLMAP's
+    # defaults (4 px; 12 px for absolute pose) suit megapixel images; on 128×96 frames they admitted wrong
+    # registrations that folded or bent the orbit (see docs/sfm.md).
+    small_max_error_px: float = 1.0
+    small_abs_pose_max_error_px: float = 2.0
+
+
+@dataclass
+class SfmConfig:
+    """Stage options. ``mode``: auto (given when the scene's latent poses are ground truth and ``allow_given``,
+    else colmap) | colmap | given; ``min_registered_fraction``: of the images given to COLMAP, below which the
+    stage stops; ``interpolate_unregistered``: fill unregistered latents from registered latents of the same
+    view; ``register_test_cameras``: register the ground-truth sharp images into the model (else the Sim(3)-mapped
+    ground truth). ``keep_work``, ``verbose`` and ``plot`` are run control, not config options."""
+
+    mode: str = "auto"
+    allow_given: bool = True
+    min_registered_fraction: float = 0.5
+    interpolate_unregistered: bool = True
+    register_test_cameras: bool = True
+    keep_work: bool = False
+    verbose: bool = False
+    plot: bool = True
+    colmap: ColmapOptions = field(default_factory=ColmapOptions)
+
+
+_RUN_CONTROL = ("keep_work", "verbose", "plot", "colmap")
+_COLMAP_CONFIG = ("matcher", "global_mapping", "refine_intrinsics", "feature_scale", "max_num_features", "device",
+                  "seed")  # fmt: skip
+# The keys of the `sfm:` config section (flat: the COLMAP options sit beside the stage's own).
+SFM_CONFIG_KEYS = tuple(f.name for f in fields(SfmConfig) if f.name not in _RUN_CONTROL) + _COLMAP_CONFIG
+
+
+def sfm_config(values: Mapping[str, Any], **run_control: Any) -> SfmConfig:
+    """:class:`SfmConfig` from flat config keys (:data:`SFM_CONFIG_KEYS`, unset ones keep their defaults) and
+    run-control fields (``keep_work``, ``verbose``, ``plot``, ``num_threads``)."""
+    unknown = sorted(set(values) - set(SFM_CONFIG_KEYS))
+    if unknown:
+        raise EigsError("--config", f"unknown sfm option(s) {', '.join(unknown)}")
+    col = {k: v for k, v in values.items() if k in _COLMAP_CONFIG}
+    if "num_threads" in run_control:
+        col["num_threads"] = run_control.pop("num_threads")
+    top = {k: v for k, v in values.items() if k not in _COLMAP_CONFIG}
+    return SfmConfig(**top, **run_control, colmap=ColmapOptions(**col))
+
+
+@dataclass
+class InitOptions:
+    """``min_points``: with fewer SfM points, ``random`` random Gaussians are added in the scene bounds;
+    ``sh_degree``: spherical-harmonics degree of the colours; ``seed``: of the random Gaussians."""
+
+    min_points: int = 1000
+    random: int = 10_000
+    sh_degree: int = 3
+    seed: int = 0
+
+
+INIT_CONFIG_KEYS = tuple(f.name for f in fields(InitOptions))

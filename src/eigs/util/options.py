@@ -1,0 +1,42 @@
+"""Stage options from one source: the stage's options dataclass holds every default; a rule passes its config
+section as one JSON object (``--config JSON``); flags given on the command line win over it.
+
+    defaults (dataclass)  ←  ``--config`` JSON (the rule's config section)  ←  explicit flags
+
+Flags therefore have no defaults of their own (argparse ``default=None``: "not given").
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterable, Mapping
+from typing import Any
+
+from eigs.errors import EigsError
+
+
+def parse_config_json(text: str | None, option: str = "--config") -> dict[str, Any]:
+    """A JSON object from the command line (``None`` or empty: ``{}``); :class:`EigsError` otherwise."""
+    if not text:
+        return {}
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as err:
+        raise EigsError(option, f"not valid JSON ({err})") from None
+    if not isinstance(value, dict):
+        raise EigsError(option, "must be a JSON object of option → value")
+    return value
+
+
+def merge(keys: Iterable[str], section: Mapping[str, Any], given: Mapping[str, Any], option: str = "--config"):
+    """``section`` (checked against ``keys``) updated by the entries of ``given`` that are not None."""
+    keys = set(keys)
+    unknown = sorted(set(section) - keys)
+    if unknown:
+        raise EigsError(option, f"unknown option(s) {', '.join(unknown)}; known: {', '.join(sorted(keys))}")
+    return {**section, **{k: v for k, v in given.items() if v is not None}}
+
+
+def flags(args: Any, keys: Iterable[str]) -> dict[str, Any]:
+    """The values of ``args`` (an argparse namespace) named ``keys`` (None when not given)."""
+    return {k: getattr(args, k, None) for k in keys}
