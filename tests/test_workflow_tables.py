@@ -6,7 +6,9 @@ from __future__ import annotations
 
 import csv
 import json
+import os
 import re
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -110,9 +112,18 @@ def test_real_config_dry_runs_when_shared_data_is_present():
 def test_toy_dag_end_to_end_produces_the_tables(tmp_path):
     """snakemake all on config/toy.yaml in a scratch directory: synth → … → train (4 runs) → evaluate → tables,
     figures. Records the toy Table I (EiGS against 3DGS) in the test output."""
-    proc = snakemake("all", "--cores", "2", "-s", str(REPO / "workflow" / "Snakefile"), "--directory", str(tmp_path),
-                     f"--configfile={REPO / 'config' / 'toy.yaml'}", timeout=1800)  # fmt: skip
-    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    cmd = [sys.executable, "-m", "snakemake", "all", "--cores", "2", "-s", str(REPO / "workflow" / "Snakefile"),
+           "--directory", str(tmp_path), f"--configfile={REPO / 'config' / 'toy.yaml'}"]  # fmt: skip
+    # its own process group, so a timeout stops the running jobs too (no orphaned training processes)
+    proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)  # fmt: skip
+    try:
+        out, err = proc.communicate(timeout=3600)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGTERM)
+        out, err = proc.communicate()
+        pytest.fail("the toy DAG took more than an hour:\n" + out[-2000:] + err[-2000:])
+    assert proc.returncode == 0, out[-3000:] + err[-3000:]
     tables = tmp_path / "results" / "tables"
     for i in range(1, 6):
         for ext in ("csv", "md", "tex"):
