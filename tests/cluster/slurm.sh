@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# A one-node SLURM cluster on this machine, for the live executor test (tests/cluster/test_slurm.py) and by hand.
+# A one-node SLURM cluster on this machine, for the live executor test (tests/cluster/test_slurm_live.py) and by hand.
 #
 #   tests/cluster/slurm.sh start DIR   install SLURM + munge from the distribution if missing (root + apt-get),
 #                                      write DIR/slurm.conf for this host, start munged, slurmctld and slurmd,
