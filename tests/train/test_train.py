@@ -150,3 +150,13 @@ def test_cli_train_and_render(toy, tmp_path):
     bad = subprocess.run(cmd[:-4] + ["--config", '{"stepz": 1}'], capture_output=True, text=True, check=False)
     assert bad.returncode == 2 and "unknown training option(s) stepz" in bad.stderr
     assert "Traceback" not in bad.stderr
+
+
+def test_cli_list_needs_no_inputs_and_missing_inputs_are_named():
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-m", "eigs", "train", "--list"], capture_output=True, text=True)
+    assert out.returncode == 0 and "bad-gaussians" in out.stdout and "eigs " in out.stdout
+    bad = subprocess.run([sys.executable, "-m", "eigs", "train", "scene.h5"], capture_output=True, text=True)
+    assert bad.returncode == 2 and "missing edi, sfm, init, output" in bad.stderr and "Traceback" not in bad.stderr

@@ -8,11 +8,12 @@ HELP = "train a Gaussian Splatting method (3dgs, edi-3dgs, oracle, …) into a r
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("scene", help="scene file (scene.h5)")
-    p.add_argument("edi", help="EDI artifact (b{B}/edi.h5)")
-    p.add_argument("sfm", help="SfM output directory (b{B}/sfm/ with poses.h5, test_cameras.h5)")
-    p.add_argument("init", help="initial Gaussians (b{B}/init.ply)")
-    p.add_argument("-o", "--output", required=True, help="run folder to write (model.ply, config.json, train_log.csv)")
+    # optional for argparse so that `eigs train --list` needs nothing else; run() checks them otherwise
+    p.add_argument("scene", nargs="?", help="scene file (scene.h5)")
+    p.add_argument("edi", nargs="?", help="EDI artifact (b{B}/edi.h5)")
+    p.add_argument("sfm", nargs="?", help="SfM output directory (b{B}/sfm/ with poses.h5, test_cameras.h5)")
+    p.add_argument("init", nargs="?", help="initial Gaussians (b{B}/init.ply)")
+    p.add_argument("-o", "--output", help="run folder to write (model.ply, config.json, train_log.csv)")
     p.add_argument("--method", default=None, help="method name (default: the config's, else 3dgs); see --list")
     p.add_argument(
         "--config",
@@ -31,6 +32,7 @@ def run(args: argparse.Namespace) -> int:
 
     import torch
 
+    from eigs.errors import EigsError
     from eigs.train.config import TrainConfig
     from eigs.train.data import load_train_data
     from eigs.train.loop import train
@@ -40,6 +42,10 @@ def run(args: argparse.Namespace) -> int:
         for name in method_names():
             print(f"{name:16s} {REGISTRY[name].description}")
         return 0
+    missing = [n for n in ("scene", "edi", "sfm", "init", "output") if getattr(args, n) is None]
+    if missing:
+        usage = "eigs train SCENE.h5 EDI.h5 SFM_DIR INIT.ply -o RUN_DIR"
+        raise EigsError("eigs train", f"missing {', '.join(missing)}: {usage}")
     cfg = TrainConfig.from_json(args.config, where="--config")
     values = cfg.to_dict()
     if args.method is not None:
@@ -48,8 +54,6 @@ def run(args: argparse.Namespace) -> int:
         values["steps"] = args.steps
     cfg = TrainConfig.from_dict(values, where="command line")
     if args.device == "cuda" and not torch.cuda.is_available():
-        from eigs.errors import EigsError
-
         raise EigsError("--device", "cuda requested but no CUDA device is available")
     device = torch.device("cuda" if args.device == "cuda" or (args.device == "auto" and torch.cuda.is_available())
                           else "cpu")  # fmt: skip
