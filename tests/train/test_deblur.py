@@ -74,10 +74,10 @@ def test_ade_receives_gradients_from_each_loss(data):
     images, _, dx, latent = m.renders(model, int(m.views[0]), 0)
     stack = torch.stack(images)
     blur, _, _ = photometric_loss(stack.mean(0), m.blurry[int(m.views[0])])
-    logs = log_intensity(stack[latent], m.response, m.edi_mode)
-    c = m.counts[int(m.views[0])]
-    cp, cn = m.thresholds(int(m.views[0]))
-    event = event_integration_loss(logs[0], logs[1], c[1] - c[0], cp, cn, m.event_mask)
+    logs = log_intensity(stack[latent], m.response, m.events.mode)
+    c = m.events.counts[int(m.views[0])]
+    cp, cn = m.events.thresholds(int(m.views[0]))
+    event = event_integration_loss(logs[0], logs[1], c[1] - c[0], cp, cn, m.events.mask)
     consis = motion_consistency_loss(model.params["means"].detach(), dx[:, 0])
     for name, loss in (("blur", blur), ("event", event), ("consistency", consis)):
         m.ade.zero_grad()

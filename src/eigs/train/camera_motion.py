@@ -18,7 +18,6 @@ from __future__ import annotations
 
 from typing import Any, ClassVar
 
-import numpy as np
 import torch
 from torch import Tensor
 
@@ -33,6 +32,7 @@ from eigs.losses.events import (
 )
 from eigs.train.config import TrainConfig
 from eigs.train.data import TrainData
+from eigs.train.event_inputs import EventInputs
 from eigs.train.methods import Method, StepOutput, register
 from eigs.train.model import GaussianModel
 from eigs.train.rigid import transform_gaussians
@@ -101,19 +101,7 @@ class TrajectoryMethod(Method):
         self.controls = controls.float().to(device).requires_grad_(True)  # (V, K, 6)
         self.blurry = data.blurry.to(device)
         self.response = data.camera_response
-        edi = data.edi
-        self.sharp = np.asarray(edi.sharp, bool)  # (V,)
-        self.edi_mode = edi.mode
-        self.counts = torch.from_numpy(edi.cum_counts).to(device)
-        self.event_mask = torch.from_numpy(edi.event_mask).to(device) if edi.event_mask is not None else None
-        if edi.threshold_pos_map is not None and edi.threshold_neg_map is not None:
-            self.c_maps: tuple[Tensor, Tensor] | None = (
-                torch.from_numpy(edi.threshold_pos_map).float().to(device),
-                torch.from_numpy(edi.threshold_neg_map).float().to(device),
-            )
-        else:
-            self.c_maps = None
-        self.threshold = np.asarray(edi.threshold, np.float64)
+        self.events = EventInputs.from_edi(data.edi, device)
 
     # ------------------------------------------------------------------ registry hooks
     def n_samples(self) -> int:
@@ -140,11 +128,8 @@ class TrajectoryMethod(Method):
         v = int(self.views[sample])
         p = model.params
         images, infos = [], []
-        if o["sharp_one_render"] and bool(self.sharp[v]):  # no motion to model: one render, the frame as target
-            img, _, info = model.render(self.ref[v], self.K, d.width, d.height, self.background, sh_degree)
-            info["means2d"].retain_grad()
-            loss, l1, dssim = photometric_loss(img, self.blurry[v], self.cfg.lambda_dssim)
-            return StepOutput(loss, {"l1": l1.item(), "dssim": dssim.item()}, [info])
+        if o["sharp_one_render"] and bool(self.events.sharp[v]):  # no motion to model: one render, the frame as target
+            return self.photometric_step(model, self.ref[v], self.blurry[v], sh_degree)
         for g in self.gaussian_motions(v):
             means, quats = transform_gaussians(p["means"], p["quats"], g)
             img, _, info = model.render(self.ref[v], self.K, d.width, d.height, self.background, sh_degree,
@@ -159,16 +144,16 @@ class TrajectoryMethod(Method):
         terms = {"l1": l1.item(), "dssim": dssim.item()}
         if o["event_loss"] != "none":
             stride = (self.n_virtual - 1) // self.n_bins
-            logs = log_intensity(stack[::stride], self.response, self.edi_mode)  # (L, H, W) at the latent times
-            counts = self.counts[v]
+            logs = log_intensity(stack[::stride], self.response, self.events.mode)  # (L, H, W) at the latent times
+            counts = self.events.counts[v]
             terms_ev = []
             for k in range(self.n_bins):
                 e = counts[k + 1] - counts[k]
                 if o["event_loss"] == "eigs":
-                    c_pos, c_neg = self.c_maps if self.c_maps is not None else (self.threshold[v],) * 2
-                    terms_ev.append(event_integration_loss(logs[k], logs[k + 1], e, c_pos, c_neg, self.event_mask))
+                    c_pos, c_neg = self.events.thresholds(v)
+                    terms_ev.append(event_integration_loss(logs[k], logs[k + 1], e, c_pos, c_neg, self.events.mask))
                 else:
-                    terms_ev.append(normalized_event_loss(logs[k], logs[k + 1], e, self.event_mask))
+                    terms_ev.append(normalized_event_loss(logs[k], logs[k + 1], e, self.events.mask))
             ev = torch.stack(terms_ev).mean()
             loss = loss + float(o["lambda_event"]) * ev
             terms["event"] = ev.item()

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 from typing import Any, ClassVar
 
-import numpy as np
 import torch
 from torch import Tensor
 
@@ -30,6 +29,7 @@ from eigs.losses.events import (
 from eigs.train.ade import ADE
 from eigs.train.config import TrainConfig
 from eigs.train.data import TrainData
+from eigs.train.event_inputs import EventInputs
 from eigs.train.methods import Method, StepOutput, register
 from eigs.train.model import GaussianModel
 from eigs.train.rigid import transform_gaussians
@@ -109,19 +109,7 @@ class MultiRender(Method):
         self.c2w = c2w  # (V, L, 4, 4) float64
         self.response = data.camera_response
         self.blurry = (data.blurry if o["blur_target"] == "blurry" else self.discrete_targets()).to(device)
-        edi = data.edi
-        self.sharp = np.asarray(edi.sharp, bool)  # (V,) views with too few events to have moved
-        self.edi_mode = edi.mode
-        self.counts = torch.from_numpy(edi.cum_counts).to(device)  # (V, L, H, W) int32
-        self.event_mask = torch.from_numpy(edi.event_mask).to(device) if edi.event_mask is not None else None
-        if edi.threshold_pos_map is not None and edi.threshold_neg_map is not None:
-            self.c_maps: tuple[Tensor, Tensor] | None = (
-                torch.from_numpy(edi.threshold_pos_map).float().to(device),
-                torch.from_numpy(edi.threshold_neg_map).float().to(device),
-            )
-        else:
-            self.c_maps = None
-        self.threshold = torch.from_numpy(np.asarray(edi.threshold, np.float64)).float()
+        self.events = EventInputs.from_edi(data.edi, device)
         self.ade: ADE | None = None
         if o["ade"]:
             self.ade = ADE(
@@ -170,12 +158,6 @@ class MultiRender(Method):
             self.ade.load_state_dict(state["ade"])
 
     # ------------------------------------------------------------------ one step
-    def thresholds(self, v: int) -> tuple[Tensor | float, Tensor | float]:
-        if self.c_maps is not None:
-            return self.c_maps
-        c = float(self.threshold[v])
-        return c, c
-
     def renders(
         self, model: GaussianModel, v: int, sh_degree: int
     ) -> tuple[list[Tensor], list[dict], Tensor | None, list[int]]:
@@ -251,16 +233,12 @@ class MultiRender(Method):
 
     def sharp_step(self, model: GaussianModel, v: int, sh_degree: int) -> StepOutput:
         """A view without motion (EDI marked it sharp): one render at its reference pose against the frame."""
-        d = self.data
-        image, _, info = model.render(self.c2w[v, 0], self.K, d.width, d.height, self.background, sh_degree)
-        info["means2d"].retain_grad()
-        loss, l1, dssim = photometric_loss(image, self.blurry[v], self.cfg.lambda_dssim)
-        return StepOutput(loss, {"l1": l1.item(), "dssim": dssim.item()}, [info])
+        return self.photometric_step(model, self.c2w[v, 0], self.blurry[v], sh_degree)
 
     def step(self, model: GaussianModel, sample: int, step: int, sh_degree: int) -> StepOutput:
         o = self.options
         v = int(self.views[sample])
-        if o["sharp_one_render"] and bool(self.sharp[v]):
+        if o["sharp_one_render"] and bool(self.events.sharp[v]):
             return self.sharp_step(model, v, sh_degree)
         images, infos, dx, latent_pos = self.renders(model, v, sh_degree)
         stack = torch.stack(images)  # (R, H, W, C) in time order
@@ -270,18 +248,18 @@ class MultiRender(Method):
         loss, l1, dssim = photometric_loss(blur, self.blurry[v], self.cfg.lambda_dssim)
         terms = {"l1": l1.item(), "dssim": dssim.item()}
         if o["event_loss"] == "eigs":
-            logs = log_intensity(stack, self.response, self.edi_mode)  # (L, H, W)
-            counts = self.counts[v]
-            c_pos, c_neg = self.thresholds(v)
+            logs = log_intensity(stack, self.response, self.events.mode)  # (L, H, W)
+            counts = self.events.counts[v]
+            c_pos, c_neg = self.events.thresholds(v)
             ev = torch.stack([
-                event_integration_loss(logs[k], logs[k + 1], counts[k + 1] - counts[k], c_pos, c_neg, self.event_mask)
+                event_integration_loss(logs[k], logs[k + 1], counts[k + 1] - counts[k], c_pos, c_neg, self.events.mask)
                 for k in range(self.n_latent - 1)
             ]).mean()  # fmt: skip
             loss = loss + float(o["lambda_event"]) * ev
             terms["event"] = ev.item()
         elif o["event_loss"] == "e2nerf":
             logs = lin_log(255.0 * luma(stack.clamp(0, 1)))
-            ev = e2nerf_event_loss(logs, self.counts[v])
+            ev = e2nerf_event_loss(logs, self.events.counts[v])
             loss = loss + float(o["lambda_event"]) * ev
             terms["event"] = ev.item()
         if o["consistency"] and dx is not None:

@@ -7,6 +7,7 @@ and decorating it with :func:`register`.
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -30,7 +31,7 @@ class StepOutput:
     infos: list[dict] = field(default_factory=list)
 
 
-class Method:
+class Method(ABC):
     """Base class. ``options``: the method's own options (``TrainConfig.method_options``), validated against
     ``OPTIONS`` (name → default)."""
 
@@ -53,11 +54,21 @@ class Method:
         self.K = data.K.to(device)
         self.background = data.background.to(device)
 
+    @abstractmethod
     def n_samples(self) -> int:
-        raise NotImplementedError
+        """Number of training samples a step draws from."""
 
+    @abstractmethod
     def step(self, model: GaussianModel, sample: int, step: int, sh_degree: int) -> StepOutput:
-        raise NotImplementedError
+        """One training step's loss on ``sample``."""
+
+    def photometric_step(self, model: GaussianModel, c2w: Tensor, target: Tensor, sh_degree: int) -> StepOutput:
+        """One render at ``c2w`` (4, 4) against ``target`` (H, W, C): L1 + D-SSIM."""
+        d = self.data
+        image, _, info = model.render(c2w, self.K, d.width, d.height, self.background, sh_degree)
+        info["means2d"].retain_grad()
+        loss, l1, dssim = photometric_loss(image, target, self.cfg.lambda_dssim)
+        return StepOutput(loss, {"l1": l1.item(), "dssim": dssim.item()}, [info])
 
     def param_groups(self) -> list[dict]:
         """Extra Adam param groups (e.g. a network), each with ``name`` and ``lr``."""
@@ -66,8 +77,8 @@ class Method:
     def state_dict(self) -> dict:
         return {}
 
-    def load_state_dict(self, state: dict) -> None:
-        pass
+    def load_state_dict(self, state: dict) -> None:  # noqa: B027 (a method without state has nothing to load)
+        """Restore what :meth:`state_dict` returned (nothing by default)."""
 
 
 REGISTRY: dict[str, type[Method]] = {}
@@ -107,19 +118,15 @@ class ImageMethod(Method):
         self.images = images.to(device)  # (S, H, W, C)
         self.c2w = c2w  # (S, 4, 4) float64
 
+    @abstractmethod
     def samples(self) -> tuple[Tensor, Tensor]:
         """(S, H, W, C) target images and (S, 4, 4) float64 camera-to-world."""
-        raise NotImplementedError
 
     def n_samples(self) -> int:
         return int(self.images.shape[0])
 
     def step(self, model: GaussianModel, sample: int, step: int, sh_degree: int) -> StepOutput:
-        d = self.data
-        image, _, info = model.render(self.c2w[sample], self.K, d.width, d.height, self.background, sh_degree)
-        info["means2d"].retain_grad()
-        loss, l1, dssim = photometric_loss(image, self.images[sample], self.cfg.lambda_dssim)
-        return StepOutput(loss, {"l1": l1.item(), "dssim": dssim.item()}, [info])
+        return self.photometric_step(model, self.c2w[sample], self.images[sample], sh_degree)
 
 
 @register
