@@ -53,6 +53,21 @@ class GaussianCloud:
     def sh_degree(self) -> int:
         return int(round(np.sqrt(self.f_rest.shape[2] + 1))) - 1
 
+    def sh_coefficients(self, sh_degree: int, channels: int) -> np.ndarray:
+        """(N, (sh_degree + 1)², channels) float32 SH coefficients, DC first. ``channels`` 1: the mean of the PLY's
+        three (grey models are stored three times); bands the cloud lacks are zero, extra ones are dropped."""
+        k = (sh_degree + 1) ** 2 - 1
+        dc = self.f_dc.astype(np.float32)  # (N, 3)
+        rest = self.f_rest.astype(np.float32)  # (N, 3, K_cloud)
+        if channels == 1:
+            dc = dc.mean(axis=1, keepdims=True)
+            rest = rest.mean(axis=1, keepdims=True)
+        sh = np.zeros((len(self), k + 1, channels), np.float32)
+        sh[:, 0, :] = dc
+        kk = min(k, rest.shape[2])
+        sh[:, 1 : kk + 1, :] = np.transpose(rest[:, :, :kk], (0, 2, 1))
+        return sh
+
     def validate(self, path: str | os.PathLike | None = None) -> None:
         n = len(self)
         shapes = {

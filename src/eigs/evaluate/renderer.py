@@ -34,17 +34,7 @@ class CloudTensors:
 def cloud_tensors(cloud: GaussianCloud, sh_degree: int, channels: int, device: torch.device) -> CloudTensors:
     """The cloud at SH degree ``sh_degree`` with ``channels`` colour channels (1: the mean of the PLY's three, as
     training stores grey models three times); higher SH bands the cloud lacks are zero, extra ones dropped."""
-    n = len(cloud)
-    k = (sh_degree + 1) ** 2 - 1
-    dc = cloud.f_dc.astype(np.float32)  # (N, 3)
-    rest = cloud.f_rest.astype(np.float32)  # (N, 3, K_cloud)
-    if channels == 1:
-        dc = dc.mean(axis=1, keepdims=True)
-        rest = rest.mean(axis=1, keepdims=True)
-    sh = np.zeros((n, k + 1, channels), np.float32)
-    sh[:, 0, :] = dc
-    kk = min(k, rest.shape[2])
-    sh[:, 1 : kk + 1, :] = np.transpose(rest[:, :, :kk], (0, 2, 1))
+    sh = cloud.sh_coefficients(sh_degree, channels)
 
     def t(a: np.ndarray) -> torch.Tensor:
         return torch.tensor(np.ascontiguousarray(a), dtype=torch.float32, device=device)

@@ -33,24 +33,15 @@ class GaussianModel:
     def from_cloud(cls, cloud: GaussianCloud, sh_degree: int, channels: int, device: torch.device) -> GaussianModel:
         """Model of degree ``sh_degree`` with ``channels`` colour channels (1: grey, the mean of the PLY's three
         DC channels; higher SH coefficients the cloud lacks start at zero, extra ones are dropped)."""
-        n = len(cloud)
-        k = (sh_degree + 1) ** 2 - 1
-        dc = cloud.f_dc.astype(np.float32)  # (N, 3)
-        rest = cloud.f_rest.astype(np.float32)  # (N, 3, K_cloud)
-        if channels == 1:
-            dc = dc.mean(axis=1, keepdims=True)
-            rest = rest.mean(axis=1, keepdims=True)
-        shn = np.zeros((n, k, channels), np.float32)
-        kk = min(k, rest.shape[2])
-        shn[:, :kk, :] = np.transpose(rest[:, :, :kk], (0, 2, 1))
+        sh = cloud.sh_coefficients(sh_degree, channels)  # (N, K, C)
 
         def leaf(a: np.ndarray) -> Tensor:
             return torch.tensor(np.ascontiguousarray(a), dtype=torch.float32, device=device).requires_grad_(True)
 
         params = {
             "means": leaf(cloud.means),
-            "sh0": leaf(dc[:, None, :]),
-            "shN": leaf(shn),
+            "sh0": leaf(sh[:, :1]),
+            "shN": leaf(sh[:, 1:]),
             "log_scales": leaf(cloud.log_scales),
             "quats": leaf(cloud.quats),
             "opacities": leaf(cloud.opacity),
