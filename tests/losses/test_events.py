@@ -66,3 +66,19 @@ def test_lin_log_is_continuous_at_the_knee_and_e2nerf_loss_zero_at_its_target():
     cum = torch.stack([torch.zeros_like(e), e])  # (2, 1, 2)
     logs = torch.stack([torch.zeros(1, 2, dtype=torch.float64), 0.3 * (e.double() + 0.5)])
     assert e2nerf_event_loss(logs, cum) < 1e-20
+
+
+def test_noise_aware_event_loss_forgives_exactly_the_stated_tolerance():
+    """deadzone + mismatch·|E| events of error cost nothing; beyond it the excess is L1 (closed form)."""
+    counts = torch.tensor([[0, 2, -4, 10]], dtype=torch.int32)
+    c = 0.25
+    log_a = torch.zeros(1, 4, dtype=torch.float64)
+    errors = torch.tensor([[0.4, -0.7, 0.9, 2.0]], dtype=torch.float64)  # in events
+    log_b = c * (counts.to(torch.float64) + errors)
+    dz, mm = 0.5, 0.1
+    tol = dz + mm * counts.abs().to(torch.float64)  # 0.5, 0.7, 0.9, 1.5
+    want = (errors.abs() - tol).clamp_min(0).mean()  # 0, 0, 0, 0.5 → 0.125
+    got = event_integration_loss(log_a, log_b, counts, c, c, deadzone=dz, mismatch=mm)
+    assert abs(float(got) - float(want)) < 1e-12 and abs(float(want) - 0.125) < 1e-12
+    # the defaults are the paper's L1
+    assert abs(float(event_integration_loss(log_a, log_b, counts, c, c)) - float(errors.abs().mean())) < 1e-12

@@ -57,6 +57,8 @@ def event_integration_loss(
     c_pos: Tensor | float,
     c_neg: Tensor | float,
     mask: Tensor | None = None,
+    deadzone: float = 0.0,
+    mismatch: float = 0.0,
 ) -> Tensor:
     """Eq. 9–10: L1 between the predicted event integral Ẽ = (log_b − log_a)/C and the net event count E of the
     same interval, averaged over the pixels that are not masked.
@@ -64,10 +66,19 @@ def event_integration_loss(
     ``log_a``, ``log_b``: (H, W) log intensities at the interval's start and end; ``counts``: (H, W) net signed
     counts; ``c_pos``/``c_neg``: thresholds (scalars or (H, W) maps) for rising/falling intensity; ``mask``:
     (H, W) bool, True where events were ignored. Zero exactly when ``log_b − log_a = C·E`` everywhere.
+
+    Sensor-noise-aware variant (beyond the paper; both 0 by default, the paper's loss): an error up to
+    ``deadzone + mismatch·|E|`` events costs nothing, the excess is L1. ``deadzone`` (events) covers the count's
+    quantisation (the sub-threshold residues at both ends of the interval: |Ẽ − E| < 1 for an ideal sensor);
+    ``mismatch`` (a fraction) the per-pixel threshold spread σ_C/C that one threshold per view cannot represent and
+    the events a refractory period swallows, both growing with the count.
     """
     diff = log_b - log_a
     c = torch.where(diff >= 0, torch.as_tensor(c_pos, dtype=diff.dtype), torch.as_tensor(c_neg, dtype=diff.dtype))
-    err = (diff / c - counts.to(diff.dtype)).abs()
+    e = counts.to(diff.dtype)
+    err = (diff / c - e).abs()
+    if deadzone > 0 or mismatch > 0:
+        err = torch.relu(err - (deadzone + mismatch * e.abs()))
     if mask is not None:
         keep = ~mask
         n = keep.sum()

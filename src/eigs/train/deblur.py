@@ -42,6 +42,10 @@ COMMON_OPTIONS: dict[str, Any] = {
     "consistency": True,  # motion-consistency loss (Eq. 3–6)
     "lambda_p": 1e-2,  # λ_p, scale of the predicted displacements (and rotation/scale changes)
     "lambda_event": 0.005,
+    # beyond the paper: sensor-noise-aware event loss (eigs.losses.events.event_integration_loss): errors up to
+    # event_deadzone + event_mismatch·|E| events are free (count quantisation, threshold mismatch, refractory period)
+    "event_deadzone": 0.0,
+    "event_mismatch": 0.0,
     "lambda_consis": 1.0,
     "huber_delta": DEFAULT_DELTA,
     "consis_reg": DEFAULT_REG,
@@ -90,6 +94,8 @@ class MultiRender(Method):
             raise EigsError(f"method {self.name}", f"event_loss must be eigs, e2nerf or none, got {o['event_loss']!r}")
         if (o["consistency"] or o["shape"] or o["pose_prior"] or int(o["subframes"]) != 1) and not o["ade"]:
             raise EigsError(f"method {self.name}", "consistency, shape, pose_prior, subframes need the ADE (ade: true)")
+        if float(o["event_deadzone"]) < 0 or float(o["event_mismatch"]) < 0:
+            raise EigsError(f"method {self.name}", "event_deadzone and event_mismatch must be >= 0")
         if int(o["subframes"]) < 1 or o["blur_weights"] not in ("uniform", "trapezoid"):
             raise EigsError(f"method {self.name}", "subframes must be >= 1 and blur_weights uniform or trapezoid")
         if o["blur_target"] not in ("blurry", "discrete") or (
@@ -251,8 +257,10 @@ class MultiRender(Method):
             logs = log_intensity(stack, self.response, self.events.mode)  # (L, H, W)
             counts = self.events.counts[v]
             c_pos, c_neg = self.events.thresholds(v)
+            dz, mm = float(o["event_deadzone"]), float(o["event_mismatch"])
             ev = torch.stack([
-                event_integration_loss(logs[k], logs[k + 1], counts[k + 1] - counts[k], c_pos, c_neg, self.events.mask)
+                event_integration_loss(logs[k], logs[k + 1], counts[k + 1] - counts[k], c_pos, c_neg, self.events.mask,
+                                       deadzone=dz, mismatch=mm)
                 for k in range(self.n_latent - 1)
             ]).mean()  # fmt: skip
             loss = loss + float(o["lambda_event"]) * ev
