@@ -63,17 +63,21 @@ def edi_e2nerf(blurry_255: np.ndarray, cum_counts: np.ndarray, c: float = E2NERF
     """E²NeRF's EDI on 0–255 values (edi-and-events.md §2.3).
 
     With S_k = ``cum_counts[k]`` (S_0 = 0): D = Σ_{k=0..B} exp(c·S_k), I_0 = min(255, (B+1)·I_blur / D),
-    I_k = I_0 · exp(c·S_k). D is evaluated as exp(log-sum-exp), never overflowing.
+    I_k = I_0 · exp(c·S_k). The product is formed in log space, log I_k = min(log 255, log(n·I) − log D) + c·S_k
+    with log D by log-sum-exp, so c·S beyond the range of exp neither overflows nor loses the frame (exp(c·S_k)
+    and 1/D cancel before exp is taken).
 
     ``blurry_255``: (H, W, C) values in [0, 255] (uint8 or float); ``cum_counts``: (B + 1, H, W) signed counts.
-    Returns (B + 1, H, W, C) float64, I_0 ≤ 255, the other frames not clamped (they may exceed 255).
+    Returns (B + 1, H, W, C) float64, I_0 ≤ 255, the other frames not clamped (they may exceed 255, up to
+    exp(:data:`EXP_CLIP`)); black pixels stay exactly 0.
     """
     s = np.asarray(cum_counts, dtype=np.float64) * float(c)  # (L, H, W)
     n = s.shape[0]
     log_d = logsumexp(s, axis=0)  # ≥ 0 because S_0 = 0
     blur = np.asarray(blurry_255, dtype=np.float64)
-    i0 = np.minimum(255.0, n * blur * np.exp(-log_d)[..., None])  # exp(−log D) ∈ (0, 1]
-    return i0[None] * _safe_exp(s)[..., None]
+    with np.errstate(divide="ignore"):  # log 0 = −inf: black pixels give exp(−inf) = 0
+        log_i0 = np.minimum(np.log(255.0), np.log(n * blur) - log_d[..., None])  # (H, W, C) log I_0
+    return np.exp(np.minimum(log_i0[None] + s[..., None], EXP_CLIP))
 
 
 def edi_discrete(
