@@ -9,6 +9,7 @@ Run: ``.venv/bin/python bench/train.py [--results results/chair] [--threads 2]``
 from __future__ import annotations
 
 import argparse
+import math
 import statistics
 import sys
 import time
@@ -68,16 +69,72 @@ def breakdown(tr: Trainer, repeats: int) -> dict[str, float]:
     return {k: statistics.median(v) for k, v in phases.items()}
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--results", default="results/chair", help="a scene's results folder (scene.h5, b4/…)")
-    ap.add_argument("--threads", type=int, default=2)
-    ap.add_argument("--repeats", type=int, default=40)
-    args = ap.parse_args()
-    torch.set_num_threads(args.threads)
-    r = Path(args.results)
-    data = load_train_data(r / "scene.h5", r / "b4" / "edi.h5", r / "b4" / "sfm", r / "b4" / "init.ply")
-    base = data.init
+METHODS = (
+    ("3dgs", {}), ("edi-3dgs", {}), ("oracle", {}), ("e2gs", {}), ("deblurring-gs", {}), ("deblurring-gs+", {}),
+    ("eigs-minus", {}), ("eigs-b", {}), ("eigs", {}),
+    ("eigs", {"pose_prior": True, "ade_zero_last": True, "blur_target": "discrete"}),
+    ("evagaussians", {}), ("bad-gaussians", {}), ("besplat", {}),
+)  # fmt: skip
+
+
+def method_breakdown(tr: Trainer, repeats: int) -> dict[str, float]:
+    """Median ms of one step of ``tr``'s method, split into the renders' forward (every ``model.render`` call), the
+    rest of the forward (ADE, trajectories, losses), the backward (rasterizer and networks), and Adam; ``ADE
+    fwd+bwd`` times the ADE network alone (all Gaussians, one view, random cotangent) when the method has one;
+    ``renders``: rasterizer calls in a step (a view EDI marks sharp takes one)."""
+    m, model = tr.method, tr.model
+    spent, calls = [0.0], [0]
+    render = model.render
+
+    def timed_render(*a, **kw):  # noqa: ANN002, ANN003
+        t = time.perf_counter()
+        out = render(*a, **kw)
+        spent[0] += time.perf_counter() - t
+        calls[0] += 1
+        return out
+
+    model.render = timed_render
+    keys = ("renders fwd", "other fwd", "backward", "adam", "whole step")
+    phases: dict[str, list[float]] = {k: [] for k in keys}
+    try:
+        for i in range(repeats + 3):
+            spent[0], calls[0] = 0.0, 0
+            t0 = time.perf_counter()
+            out = m.step(model, i % m.n_samples(), 0, 0)
+            t1 = time.perf_counter()
+            render_s, n_renders = spent[0], calls[0]
+            tr.optimizer.zero_grad(set_to_none=True)
+            out.loss.backward()
+            t2 = time.perf_counter()
+            tr.optimizer.step()
+            t3 = time.perf_counter()
+            tr.train_step()
+            t4 = time.perf_counter()
+            if i >= 3:
+                for k, v in (("renders fwd", render_s), ("other fwd", t1 - t0 - render_s), ("backward", t2 - t1),
+                             ("adam", t3 - t2), ("whole step", t4 - t3)):  # fmt: skip
+                    phases[k].append(v * 1e3)
+    finally:
+        model.render = render
+    res = {k: statistics.median(v) for k, v in phases.items()}
+    res["renders"] = float(n_renders)
+    ade = getattr(m, "ade", None)
+    res["ADE fwd+bwd"] = float("nan")
+    if ade is not None:
+        x = model.params["means"].detach()
+        ts = []
+        for i in range(repeats + 3):
+            t = time.perf_counter()
+            y = ade(x, m.pose_inputs[0])
+            y.backward(torch.randn_like(y))
+            if i >= 3:
+                ts.append((time.perf_counter() - t) * 1e3)
+        res["ADE fwd+bwd"] = statistics.median(ts)
+    return res
+
+
+def size_sections(args: argparse.Namespace, r: Path, data, base: GaussianCloud) -> None:  # noqa: ANN001
+    """The 3dgs step broken down by Gaussian count and by image size."""
     cfg = TrainConfig.from_dict({"method": "3dgs", "densify": False})
     rows = []
     for n in (5_000, 10_000, 20_000, 40_000):
@@ -112,6 +169,49 @@ def main() -> None:
     )
     write_section("train-step", "Training step", md)
     print(md)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--results", default="results/chair", help="a scene's results folder (scene.h5, b4/…)")
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--repeats", type=int, default=40)
+    ap.add_argument("--methods-only", action="store_true", help="only the per-method section")
+    args = ap.parse_args()
+    torch.set_num_threads(args.threads)
+    r = Path(args.results)
+    data = load_train_data(r / "scene.h5", r / "b4" / "edi.h5", r / "b4" / "sfm", r / "b4" / "init.ply")
+    base = data.init
+    w0, h0, k0 = data.width, data.height, data.K.clone()
+    if not args.methods_only:
+        size_sections(args, r, data, base)
+    # one step of every method, 10k Gaussians
+    data.width, data.height, data.K = w0, h0, k0
+    data.init = resized_cloud(base, 10_000)
+    mrows = []
+    for name, mo in METHODS:
+        cfg_m = TrainConfig.from_dict({"method": name, "densify": False, "method_options": mo})
+        tr = Trainer(data, cfg_m, torch.device("cpu"))
+        tr.warm_up()
+        b = method_breakdown(tr, max(10, args.repeats // 4))
+        label = name + (" + " + ", ".join(mo) if mo else "")
+        renders = b["renders fwd"]
+        ade = "" if math.isnan(b["ADE fwd+bwd"]) else f"{b['ADE fwd+bwd']:.1f}"
+        ratio = b["whole step"] / float(mrows[0][6]) if mrows else 1.0
+        mrows.append([label, f"{b['renders']:.0f}", f"{renders:.1f}", f"{b['other fwd']:.1f}", f"{b['backward']:.1f}",
+                      f"{b['adam']:.1f}", f"{b['whole step']:.1f}", ade, f"{ratio:.1f}×"])  # fmt: skip
+        print(mrows[-1], flush=True)
+    mcols = ["method", "renders", "renders fwd", "other fwd", "backward", "Adam", "whole step", "ADE fwd+bwd", "÷ 3dgs"]
+    mmd = (
+        f"One training step of every method on `{r.name}` (10,000 Gaussians, {data.width}×{data.height}, no "
+        f"densification), {args.threads} threads, median of {max(10, args.repeats // 4)} steps (ms). `renders fwd`: "
+        "every rasterizer call of the step; `other fwd`: the rest of the forward (ADE network, trajectories, "
+        "losses); `backward`: rasterizer and network gradients; `whole step`: `Trainer.train_step`; `ADE fwd+bwd`: "
+        "the ADE network alone on all Gaussians; `÷ 3dgs`: whole step over the `3dgs` step of the same run.\n\n"
+        + table(mcols, mrows) + "\n"
+    )
+    write_section("train-step-methods", "Training step of every method", mmd)
+    print(mmd)
 
 
 if __name__ == "__main__":
