@@ -193,3 +193,25 @@ def test_sharp_views_use_one_render(data, name):
     assert len(m.step(model, sample, 0, 0).infos) > 1
     off = _method(d2, name, sharp_one_render=False).method
     assert len(off.step(model, 0, 0, 0).infos) > 1
+
+
+def test_latent_weight_adds_the_l1_of_each_latent_render_to_its_edi_frame(data):
+    """The step's extra term is the mean |render_k − EDI latent_k| over the latent times with a pose (computed here
+    from the method's own renders), times ``latent_weight``; off (0) it is absent."""
+    w = 0.5
+    tr = _method(data, "eigs-minus", latent_weight=w, consistency=False)
+    m, model = tr.method, tr.model
+    sample = 0
+    v = int(m.views[sample])
+    images, _, _, pos = m.renders(model, v, 0)
+    stack = torch.stack(images)[pos]
+    ok = torch.from_numpy(data.valid[v])
+    expect = (stack[ok] - data.latent[v][ok]).abs().mean()
+    out = m.step(model, sample, 0, 0)
+    torch.testing.assert_close(torch.tensor(out.terms["latent"]), expect.detach(), atol=1e-6, rtol=1e-5)
+    base = _method(data, "eigs-minus", consistency=False)
+    out0 = base.method.step(base.model, sample, 0, 0)
+    assert "latent" not in out0.terms
+    torch.testing.assert_close(out.loss, out0.loss + w * expect, atol=1e-6, rtol=1e-5)
+    with pytest.raises(EigsError, match="latent_weight"):
+        _method(data, "eigs", latent_weight=-1.0)

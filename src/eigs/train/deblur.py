@@ -62,6 +62,10 @@ COMMON_OPTIONS: dict[str, Any] = {
     # events: the average of EDI's latent frames with the same weights, which equals the continuous exposure
     # average of the frame; docs/methods.md)
     "blur_target": "blurry",
+    # beyond the paper: L1 between each latent render k and EDI's latent frame k, with this weight (0: off); the
+    # event-integration loss constrains only differences of consecutive renders, this ties each render to the frame
+    # the events and the blurry frame imply for its time (no extra renders)
+    "latent_weight": 0.0,
     "ade_zero_last": False,  # beyond the paper: the ADE's last layer starts at zero (no displacement at step 0)
     "sharp_one_render": True,  # views EDI marks sharp (too few events) use one render and the photometric loss only
 }
@@ -115,6 +119,10 @@ class MultiRender(Method):
         self.c2w = c2w  # (V, L, 4, 4) float64
         self.response = data.camera_response
         self.blurry = (data.blurry if o["blur_target"] == "blurry" else self.discrete_targets()).to(device)
+        if float(o["latent_weight"]) < 0:
+            raise EigsError(f"method {self.name}", "latent_weight must be >= 0")
+        self.latent = data.latent.to(device) if float(o["latent_weight"]) > 0 else None  # (V, L, H, W, C)
+        self.valid = torch.from_numpy(data.valid)  # (V, L) latent poses SfM registered
         self.events = EventInputs.from_edi(data.edi, device)
         self.ade: ADE | None = None
         if o["ade"]:
@@ -270,6 +278,11 @@ class MultiRender(Method):
             ev = e2nerf_event_loss(logs, self.events.counts[v])
             loss = loss + float(o["lambda_event"]) * ev
             terms["event"] = ev.item()
+        if self.latent is not None:
+            ok = self.valid[v]  # a latent frame without a pose has no render of its own time
+            lat = (stack[ok] - self.latent[v][ok]).abs().mean()
+            loss = loss + float(o["latent_weight"]) * lat
+            terms["latent"] = lat.item()
         if o["consistency"] and dx is not None:
             x = model.params["means"].detach()
             cons = torch.stack([
