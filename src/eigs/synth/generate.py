@@ -32,7 +32,7 @@ from eigs.scene import (
 from eigs.synth.raycast import RayCaster
 from eigs.synth.scenes import SceneSpec, get_spec, resolve_params
 from eigs.synth.simulator import EventChunk, EventSimulator, SensorParams, log_luma
-from eigs.synth.trajectory import CameraPath, Orbit, Shake, Timeline, spiral_orbit
+from eigs.synth.trajectory import CameraPath, Orbit, Shake, Timeline, spiral_orbit, still_view_indices
 from eigs.util.image import linear_to_srgb, srgb_to_linear, to_uint8
 from eigs.util.progress import progress
 
@@ -129,7 +129,8 @@ def _sensor(p: dict[str, Any]) -> SensorParams:
 
 
 def build_path(p: dict[str, Any], spec: SceneSpec, rng: np.random.Generator) -> tuple[CameraPath, Orbit]:
-    """Ground-truth path of the training views and the novel-view orbit (in-between azimuths, other elevations)."""
+    """Ground-truth path of the training views and the novel-view orbit (in-between azimuths, other elevations).
+    The views of :func:`still_view_indices` (``still_views``) are held still during their exposures."""
     kw = {"radius": p["orbit_radius"], "el_min": p["elevation_min"], "el_max": p["elevation_max"],
           "target": spec.target}
     train = spiral_orbit(p["n_train"], **kw)
@@ -143,7 +144,12 @@ def build_path(p: dict[str, Any], spec: SceneSpec, rng: np.random.Generator) -> 
         shake = Shake.none()
     tl = Timeline(p["n_train"], p["exposure_us"], p["period_us"], p["lead_us"], p["subframes"], p["gap_subframes"],
                   p["lead_subframes"])
-    return CameraPath(train, tl, shake), novel
+    still_idx = still_view_indices(p["n_train"], p["still_views"])
+    still = None
+    if still_idx.size:
+        still = np.zeros(p["n_train"], bool)
+        still[still_idx] = True
+    return CameraPath(train, tl, shake, still), novel
 
 
 def generate(
@@ -290,6 +296,7 @@ def generate(
         "exposure_crossings_p99": _hist_quantile(exp_hist, 0.99),
         "exposure_crossings_p999": _hist_quantile(exp_hist, 0.999),
         "exposure_crossings_max": int(np.flatnonzero(exp_hist)[-1]) if exp_hist.any() else 0,
+        "still_views": [int(v) for v in np.flatnonzero(path.still)] if path.still is not None else [],
         "blur_median_px": float(np.median(blur_px)) if blur_px.size else 0.0,
         "blur_p90_px": float(np.percentile(blur_px, 90)) if blur_px.size else 0.0,
     }
@@ -301,6 +308,8 @@ def generate(
         stats["exposure_crossings_p99"], stats["exposure_crossings_p999"], stats["exposure_crossings_max"],
         stats["seconds"], t_render, t_sim,
     )
+    if stats["still_views"]:
+        log.info("%s: views held still during their exposure (sharp frames): %s", name, stats["still_views"])
     return Generated(scene, p, spec, path, caster, novel_c2w, blur_px, stats)
 
 

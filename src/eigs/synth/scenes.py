@@ -47,6 +47,7 @@ DEFAULTS: dict[str, Any] = {
     "shake_trans": 0.025,  # RMS translation per axis at strength 1 (scene units)
     "shake_fmin_hz": 2.0,
     "shake_fmax_hz": 12.0,
+    "still_views": 0.0,  # fraction of training views held still during their exposure (sharp frame, noise events)
     # renderer
     "supersample": 2,
     "texture_size": 128,
@@ -356,6 +357,8 @@ def check_params(p: dict[str, Any], where: str = "parameters") -> None:
     for k in ("shake", "shake_rot_deg", "shake_trans"):
         need(p[k] >= 0, f"{k} must be ≥ 0, got {p[k]}")
     need(0 < p["shake_fmin_hz"] <= p["shake_fmax_hz"], "need 0 < shake_fmin_hz ≤ shake_fmax_hz")
+    need(0 <= p["still_views"] <= 1, f"still_views must lie in [0, 1] (a fraction of the training views), got "
+         f"{p['still_views']}")
     need(p["seed"] >= 0, f"seed must be ≥ 0, got {p['seed']}")
     need(p["contrast_threshold"] > 0, "contrast_threshold must be > 0")
     for k in ("threshold_pos", "threshold_neg"):

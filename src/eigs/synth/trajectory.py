@@ -192,14 +192,49 @@ class Timeline:
         return np.concatenate(parts)
 
 
+def still_view_indices(n_views: int, fraction: float) -> np.ndarray:
+    """(n,) int64 indices of the views held still, n = round(``fraction``·``n_views``), spread evenly over the
+    recording: view ⌊(i + ½)·V/n⌋ for i = 0..n−1 (V = 8, n = 2 → views 2 and 6). Independent of the seed."""
+    n = int(np.floor(fraction * n_views + 0.5))
+    n = min(max(n, 0), n_views)
+    if n == 0:
+        return np.zeros(0, np.int64)
+    return np.floor((np.arange(n) + 0.5) * n_views / n).astype(np.int64)
+
+
 @dataclass
 class CameraPath:
     """The full ground-truth camera path: orbit base poses (static during each exposure, smooth moves in the
-    gaps) composed with the never-stopping :class:`Shake`."""
+    gaps) composed with the :class:`Shake`, which never stops except during the exposures of the ``still`` views.
+
+    ``still``: (V,) bool or None (no view held still). During a still view's exposure [start_v, end_v] the shake
+    is frozen at its value at start_v, so every sub-frame of that exposure has the same pose; in the gap that
+    follows, the shake runs at period/gap speed until it is back in step at start_{v+1} (a continuous,
+    monotone time warp, so later views shake exactly as they would without the pause).
+    """
 
     orbit: Orbit
     timeline: Timeline
     shake: Shake
+    still: np.ndarray | None = None
+
+    def shake_time(self, t_us: np.ndarray) -> np.ndarray:
+        """(N,) float64 time (µs) at which the shake is evaluated for path times ``t_us`` (N,): ``t`` itself,
+        except during a still view's exposure (start_v) and the gap after it (warped linearly from start_v at
+        end_v back to start_{v+1})."""
+        t = np.asarray(t_us, dtype=np.float64)
+        if self.still is None or not np.any(self.still):
+            return t
+        tl = self.timeline
+        s = tl.starts.astype(np.float64)
+        v = np.clip(np.searchsorted(s, t, side="right") - 1, 0, tl.n_views - 1)
+        hold = np.asarray(self.still, dtype=bool)[v] & (t >= s[v])
+        e = s[v] + tl.exposure_us
+        last = v + 1 >= tl.n_views  # the stream ends with the last exposure: nothing to catch up with
+        nxt = np.where(last, e, s[np.minimum(v + 1, tl.n_views - 1)])
+        u = np.clip((t - e) / np.maximum(nxt - e, 1.0), 0.0, 1.0)  # 0 up to end_v, 1 at start_{v+1}
+        warped = np.where(last, s[v], s[v] + u * (nxt - s[v]))
+        return np.where(hold, warped, t)
 
     def base(self, t_us: np.ndarray) -> np.ndarray:
         """(N, 4, 4) unshaken poses: view v's orbit pose until end_v, then a smoothstep move (azimuth, elevation,
@@ -222,7 +257,7 @@ class CameraPath:
     def __call__(self, t_us: np.ndarray) -> np.ndarray:
         """(N, 4, 4) ground-truth camera-to-world at times ``t_us`` (N,) µs."""
         t = np.atleast_1d(np.asarray(t_us, dtype=np.float64))
-        return self.base(t) @ self.shake.offsets(t)
+        return self.base(t) @ self.shake.offsets(self.shake_time(t))
 
 
 def interpolate_poses(t_query: np.ndarray, t_samples: np.ndarray, c2w: np.ndarray) -> np.ndarray:
