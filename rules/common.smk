@@ -9,6 +9,7 @@ import shlex
 from snakemake.utils import validate
 
 from eigs.events.options import DEFAULT_BINS
+from eigs.train.field_config import FIELD_METHODS
 
 
 validate(config, schema="../workflow/schemas/config.schema.yaml")
@@ -112,9 +113,25 @@ def run_scenes(run):
     return ALL_SCENES
 
 
+def run_model_file(run):
+    """The model file of a run folder: model.npz for a radiance-field method (docs/training.md), else model.ply."""
+    return "model.npz" if RUNS[run]["method"] in FIELD_METHODS else "model.ply"
+
+
+GAUSSIAN_RUNS = sorted(r for r in RUNS if run_model_file(r) == "model.ply")
+FIELD_RUNS = sorted(r for r in RUNS if run_model_file(r) == "model.npz")
+
+
+def run_model(wildcards):
+    """Input function: the model file of the run folder of `wildcards` (scene, bins, run)."""
+    return f"results/{wildcards.scene}/b{wildcards.bins}/{wildcards.run}/{run_model_file(wildcards.run)}"
+
+
 def train_targets():
     return [
-        f"results/{scene}/b{run_bins(run)}/{run}/model.ply" for run in sorted(RUNS) for scene in run_scenes(run)
+        f"results/{scene}/b{run_bins(run)}/{run}/{run_model_file(run)}"
+        for run in sorted(RUNS)
+        for scene in run_scenes(run)
     ]
 
 

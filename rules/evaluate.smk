@@ -5,7 +5,7 @@
 
 rule evaluate:
     input:
-        model="results/{scene}/b{bins}/{run}/model.ply",
+        model=run_model,
         config="results/{scene}/b{bins}/{run}/config.json",
         scene="results/{scene}/scene.h5",
         sfm="results/{scene}/b{bins}/sfm",

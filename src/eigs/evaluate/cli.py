@@ -12,7 +12,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "Writes OUTPUT (metrics.json), per_image.csv and renders/ (8-bit PNGs, the images that were scored) in "
         "OUTPUT's folder. docs/evaluation.md describes the protocol and the fields."
     )
-    p.add_argument("run", help="run folder (model.ply, config.json)")
+    p.add_argument("run", help="run folder (model.ply or model.npz, config.json)")
     p.add_argument("scene", help="scene file (scene.h5): ground truth, background")
     p.add_argument("sfm", help="SfM output directory (poses.h5, test_cameras.h5)")
     p.add_argument("-o", "--output", required=True, help="metrics.json to write")
@@ -37,6 +37,7 @@ def run(args: argparse.Namespace) -> int:
     summary = ", ".join(
         f"{k}: " + " ".join(f"{n}={v:.4g}" for n, v in g.items() if isinstance(v, float)) for k, g in m.items()
     )
-    logging.getLogger("eigs.evaluate").info("wrote %s (%s; %.1f FPS, %d Gaussians)", args.output, summary,
-                                            res["fps"] or float("nan"), res["n_gaussians"])  # fmt: skip
+    size = f"{res['n_gaussians']} Gaussians" if res["n_gaussians"] is not None else f"{res['n_voxels']} voxels"
+    logging.getLogger("eigs.evaluate").info("wrote %s (%s; %.1f FPS, %s)", args.output, summary,
+                                            res["fps"] or float("nan"), size)  # fmt: skip
     return 0

@@ -11,8 +11,8 @@ for forward-facing captures, else an orbit), as E²NeRF's real protocol (blur vi
 whose BRISQUE is undefined (e.g. constant: a path frame that misses the scene) is counted in ``brisque_undefined``
 and left out of the mean, never scored silently.
 
-Every run also reports training seconds and steps (``config.json``), the number of Gaussians and the test-time
-frames per second (render only, after a warm-up render).
+Every run also reports training seconds and steps (``config.json``), the number of Gaussians (``n_voxels`` for a
+field run, whose ``n_gaussians`` is null) and the test-time frames per second (render only, after a warm-up render).
 """
 
 from __future__ import annotations
@@ -90,9 +90,8 @@ def evaluate_run(
     """
     import torch
 
-    from eigs.artifacts.gaussians import read_gaussian_ply
     from eigs.artifacts.poses import METHODS, read_poses, read_test_cameras
-    from eigs.evaluate.renderer import cloud_tensors, render_uint8
+    from eigs.evaluate.renderer import CloudTensors, load_model, render_uint8
     from eigs.scene import read_scene
     from eigs.util.atomic import atomic_path
     from eigs.util.cameras import render_path
@@ -102,14 +101,10 @@ def evaluate_run(
     doc = read_run_config(run_dir)
     train, facts = doc["train"], doc["run"]
     scene = read_scene(scene_path, events=False)
-    cloud = read_gaussian_ply(run_dir / "model.ply")
-    if len(cloud) == 0:
-        raise EigsError(run_dir / "model.ply", "the model has no Gaussians")
-    cloud.validate(run_dir / "model.ply")
     if device == "cuda" and not torch.cuda.is_available():
         raise EigsError("--device", "cuda requested but no CUDA device is available")
     dev = torch.device("cuda" if device == "cuda" or (device == "auto" and torch.cuda.is_available()) else "cpu")
-    g = cloud_tensors(cloud, int(train["sh_degree"]), int(scene.channels), dev)
+    g = load_model(run_dir, int(train["sh_degree"]), int(scene.channels), dev)
     bg = scene.background if scene.background is not None else np.zeros(scene.channels)
     poses = read_poses(sfm_dir)
     w, h = poses.width, poses.height
@@ -205,7 +200,8 @@ def evaluate_run(
         "metrics": metrics,
         "train_seconds": float(facts["train_seconds"]),
         "steps": int(train.get("steps", 0)),
-        "n_gaussians": len(cloud),
+        "n_gaussians": len(g) if isinstance(g, CloudTensors) else None,
+        "n_voxels": None if isinstance(g, CloudTensors) else g.n_voxels,
         "fps": finite_or_none(fps),
         "render_ms": finite_or_none(1e3 * float(np.mean(times))) if times else None,
         "frames_timed": len(times),

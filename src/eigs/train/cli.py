@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-HELP = "train a Gaussian Splatting method (3dgs, edi-3dgs, oracle, …) into a run folder"
+HELP = "train a method (Gaussian: 3dgs, eigs, …; radiance field: nerf, e2nerf, …) into a run folder"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -13,7 +13,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("edi", nargs="?", help="EDI artifact (b{B}/edi.h5)")
     p.add_argument("sfm", nargs="?", help="SfM output directory (b{B}/sfm/ with poses.h5, test_cameras.h5)")
     p.add_argument("init", nargs="?", help="initial Gaussians (b{B}/init.ply)")
-    p.add_argument("-o", "--output", help="run folder to write (model.ply, config.json, train_log.csv)")
+    p.add_argument("-o", "--output", help="run folder to write (model.ply or model.npz, config.json, train_log.csv)")
     p.add_argument("--method", default=None, help="method name (default: the config's, else 3dgs); see --list")
     p.add_argument(
         "--config",
@@ -35,12 +35,13 @@ def run(args: argparse.Namespace) -> int:
     from eigs.errors import EigsError
     from eigs.train.config import TrainConfig
     from eigs.train.data import load_train_data
+    from eigs.train.field_methods import is_field_method
     from eigs.train.loop import train
-    from eigs.train.methods import REGISTRY, method_names
+    from eigs.train.methods import method_description, method_names
 
     if args.list:
         for name in method_names():
-            print(f"{name:16s} {REGISTRY[name].description}")
+            print(f"{name:16s} {method_description(name)}")
         return 0
     missing = [n for n in ("scene", "edi", "sfm", "init", "output") if getattr(args, n) is None]
     if missing:
@@ -59,10 +60,17 @@ def run(args: argparse.Namespace) -> int:
                           else "cpu")  # fmt: skip
     data = load_train_data(args.scene, args.edi, args.sfm, args.init)
     inputs = {"scene": args.scene, "edi": args.edi, "sfm": args.sfm, "init": args.init}
-    res = train(data, cfg, args.output, device, inputs=inputs)
-    final = res.rows[-1] if res.rows else {}
+    if is_field_method(cfg.method):
+        from eigs.train.field_loop import train_field
+
+        fres = train_field(data, cfg, args.output, device, inputs=inputs)
+        rows, size, seconds = fres.rows, f"{fres.model.n_voxels} voxels", fres.train_seconds
+    else:
+        res = train(data, cfg, args.output, device, inputs=inputs)
+        rows, size, seconds = res.rows, f"{len(res.model)} Gaussians", res.train_seconds
+    final = rows[-1] if rows else {}
     logging.getLogger("eigs.train").info(
-        "wrote %s: %d Gaussians, %.1f s of training, held-out PSNR novel %s dB",
-        args.output, len(res.model), res.train_seconds, final.get("psnr_novel", "n/a"),
+        "wrote %s: %s, %.1f s of training, held-out PSNR novel %s dB",
+        args.output, size, seconds, final.get("psnr_novel", "n/a"),
     )  # fmt: skip
     return 0

@@ -120,15 +120,57 @@ class Trainer:
             torch.save(self.state_dict(), tmp)
 
     def load_checkpoint(self, path: Path) -> bool:
-        """Resume from ``path``; False (and a warning) when it belongs to another configuration or is unreadable."""
+        """Resume from ``path``; False (and a warning naming it) when it belongs to another configuration or is
+        unreadable or damaged, the trainer then as freshly built (a checkpoint is a cache: the run starts over)."""
         try:
             state = torch.load(path, map_location="cpu", weights_only=False)
         except Exception as err:  # a truncated or foreign file: start over rather than fail
-            log.warning("ignoring unreadable checkpoint %s (%s)", path, err)
+            log.warning("ignoring unreadable checkpoint %s (%s)", path, str(err).splitlines()[0] if str(err) else err)
+            return False
+        if not isinstance(state, dict):
+            log.warning("ignoring checkpoint %s: not a checkpoint", path)
             return False
         if state.get("version") != CHECKPOINT_VERSION or state.get("config") != self.cfg.to_dict():
             log.warning("ignoring checkpoint %s: written for another configuration", path)
             return False
+        problem = self._checkpoint_problem(state)
+        if problem is None:
+            try:
+                self._restore(state)
+            except Exception as err:  # damage the checks above cannot see: rebuild and start over
+                problem = f"{type(err).__name__}: {err}".splitlines()[0]
+                self.__init__(self.data, self.cfg, self.device)
+        if problem is not None:
+            log.warning("ignoring damaged checkpoint %s (%s)", path, problem)
+            return False
+        log.info("resumed from %s at step %d", path, self.step)
+        return True
+
+    def _checkpoint_problem(self, state: dict) -> str | None:
+        """What makes ``state`` unusable (missing parts; parameters or Adam moments of the wrong shape or not
+        finite: torch's zip reader checks no CRC, so flipped bytes load silently), or None."""
+        params = state.get("params")
+        if not isinstance(params, dict) or any(not isinstance(params.get(n), torch.Tensor) for n in PARAM_NAMES):
+            return "parameters missing"
+        n = params["means"].shape[0] if params["means"].dim() else -1
+        for name in PARAM_NAMES:
+            t, ref = params[name], self.model.params[name]
+            if t.dim() != ref.dim() or t.shape[0] != n or t.shape[1:] != ref.shape[1:] or t.dtype != ref.dtype:
+                return f"parameter {name} has shape {tuple(t.shape)}"
+            if not bool(torch.isfinite(t).all()):
+                return f"parameter {name} has NaN/Inf values"
+        opt = state.get("optimizer")
+        if not isinstance(opt, dict) or not isinstance(opt.get("state"), dict):
+            return "optimizer state missing"
+        for entry in opt["state"].values():
+            for key, t in (entry.items() if isinstance(entry, dict) else []):
+                if isinstance(t, torch.Tensor) and t.is_floating_point() and not bool(torch.isfinite(t).all()):
+                    return f"optimizer {key} has NaN/Inf values"
+        missing = [k for k in ("step", "strategy", "method", "rng", "torch_rng", "order", "rows", "wall", "bad",
+                               "skipped") if k not in state]  # fmt: skip
+        return f"missing {', '.join(missing)}" if missing else None
+
+    def _restore(self, state: dict) -> None:
         for name in PARAM_NAMES:
             self.model.params[name] = state["params"][name].to(self.device).requires_grad_(True)
         self.optimizer = make_optimizer(self.model, self.cfg, self.extent)
@@ -142,8 +184,6 @@ class Trainer:
         self.order = list(state["order"])
         self.step, self.rows, self.wall = int(state["step"]), list(state["rows"]), float(state["wall"])
         self.bad, self.skipped = int(state["bad"]), int(state["skipped"])
-        log.info("resumed from %s at step %d", path, self.step)
-        return True
 
     # ------------------------------------------------------------------ one step
     @torch.no_grad()
@@ -245,14 +285,15 @@ def train(
     return RunResult(tr.model, tr.method, tr.rows, tr.wall, tr.skipped)
 
 
-def log_csv(rows: list[dict[str, Any]]) -> str:
-    """The rows as CSV: fixed columns first, then each method's loss terms in first-seen order."""
+def log_csv(rows: list[dict[str, Any]], fixed: tuple[str, ...] = LOG_COLUMNS) -> str:
+    """The rows as CSV: ``fixed`` columns (step, wall_s, loss, then the model size and held-out columns), each
+    method's loss terms in first-seen order after the first three."""
     extra: list[str] = []
     for r in rows:
         for k in r:
-            if k not in LOG_COLUMNS and k not in extra:
+            if k not in fixed and k not in extra:
                 extra.append(k)
-    columns = [*LOG_COLUMNS[:3], *extra, *LOG_COLUMNS[3:]]
+    columns = [*fixed[:3], *extra, *fixed[3:]]
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=columns, restval="", lineterminator="\n")
     w.writeheader()

@@ -162,5 +162,16 @@ class Oracle(ImageMethod):
 
 
 def method_names() -> list[str]:
+    """Every method a run may name: the Gaussian ones of :data:`REGISTRY` and the radiance-field ones of
+    :data:`eigs.train.field_methods.FIELD_REGISTRY`."""
+    from eigs.train.field_methods import FIELD_REGISTRY
+
     _load_all()
-    return sorted(REGISTRY)
+    return sorted({*REGISTRY, *FIELD_REGISTRY})
+
+
+def method_description(name: str) -> str:
+    from eigs.train.field_methods import FIELD_REGISTRY
+
+    _load_all()
+    return (REGISTRY.get(name) or FIELD_REGISTRY[name]).description

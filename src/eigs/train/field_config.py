@@ -1,0 +1,76 @@
+"""Options of the radiance-field methods (``nerf``, ``deblur-nerf``, ``edi-nerf``, ``e2nerf``): the one source of
+their defaults. A run sets them in ``options: {method_options: {…}}``; the shared keys of
+:class:`eigs.train.config.TrainConfig` that a field run reads are ``steps``, ``seed``, ``log_every``, ``eval_every``,
+``checkpoint_every`` and ``max_bad_steps`` (the Gaussian learning rates and densification keys do not apply).
+
+Units: world units of the canonical SfM frame (RMS camera radius 1); voxel counts are totals over the grid (its
+shape follows the box's aspect); fractions are of the run's steps.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any
+
+# The field methods' names (the registry in eigs.train.field_methods holds exactly these; the workflow reads this
+# set, without importing torch, to give a field run its model file, model.npz instead of model.ply)
+FIELD_METHODS = frozenset({"nerf", "deblur-nerf", "edi-nerf", "e2nerf"})
+
+
+@dataclass(frozen=True)
+class FieldOptions:
+    """Every option of the voxel-grid field and its training, with its default."""
+
+    batch_rays: int = 4096  # rays per step (e2nerf / deblur-nerf: rays rendered, shared among latents / kernel)
+    n_samples: int = 128  # samples per ray inside the box
+    near: float = 0.05  # nearest distance sampled
+    # box: the init.ply points between these quantiles per axis, padded by this fraction of the extent each side
+    box_quantile: float = 0.01
+    box_margin: float = 0.05
+    # coarse-to-fine: the grid grows from voxels_start to voxels_final in len(grow_at) steps (geometric)
+    voxels_start: int = 48**3
+    voxels_final: int = 160**3
+    grow_at: tuple[float, ...] = (0.1, 0.2, 0.3, 0.4)
+    # σ = softplus(raw + shift) with raw = 0 at the start and the shift chosen so that a fresh voxel has this α over
+    # one sample interval (DVGO's alpha_init); the interval is the box diagonal / n_samples
+    alpha_init: float = 1e-3
+    lr_grid: float = 0.1  # Adam on the grid (DVGO), decayed exponentially to lr_grid · lr_decay at the end
+    lr_decay: float = 0.1
+    tv_density: float = 0.0  # total-variation weights on the raw grid (mean squared neighbour differences)
+    tv_colour: float = 0.0
+    # occupancy: every occupancy_every steps from occupancy_start, voxels whose α over one sample interval is below
+    # occupancy_alpha, with no neighbour above it, are skipped (above alpha_init: space no ray asked for is empty)
+    occupancy_every: int = 50
+    occupancy_start: int = 20
+    occupancy_alpha: float = 2e-3
+
+
+@dataclass(frozen=True)
+class DeblurNerfOptions:
+    """Deblur-NeRF's deformable sparse kernel (DSK)."""
+
+    kernel_points: int = 5  # K rays per pixel (Deblur-NeRF synthetic)
+    embed_dim: int = 32  # per-view embedding
+    dsk_width: int = 64
+    dsk_depth: int = 3  # linear layers
+    dsk_freqs: int = 4  # positional-encoding frequencies of the pixel position
+    init_window: float = 1.0  # initial kernel points drawn uniformly within ± this many pixels (fixed pattern)
+    lr_dsk: float = 1e-3
+    lambda_align: float = 0.1  # pulls the first kernel point onto the pixel's own ray
+
+
+@dataclass(frozen=True)
+class E2NerfOptions:
+    """E²NeRF: N + 1 latent renders per pixel, blur loss on their mean and the pairwise event loss."""
+
+    lambda_event: float = 0.001  # E²NeRF code's weight beside its MSE blur loss (../shared/docs/edi-and-events.md §4)
+
+
+def options_dict(*parts: Any) -> dict[str, Any]:
+    """The defaults of several option dataclasses as one mapping (tuples as lists, as JSON gives them)."""
+    out: dict[str, Any] = {}
+    for p in parts:
+        for k, v in asdict(p).items():
+            out[k] = list(v) if isinstance(v, tuple) else v
+    return out
+
