@@ -97,8 +97,9 @@ def occupied(field: FieldTensors, pts: Tensor) -> Tensor:
     return occ[idx[..., 2], idx[..., 1], idx[..., 0]]
 
 
-def _occupied_along(field: FieldTensors, origins: Tensor, dirs: Tensor, t: Tensor) -> Tensor:
-    """:func:`occupied` at the points origins + t · dirs ((R, 3), (R, 3), (R, S) → (R, S)), without forming them."""
+def _occupied_along(field: FieldTensors, origins: Tensor, dirs: Tensor, t: Tensor) -> tuple[Tensor, Tensor]:
+    """:func:`occupied` at the points origins + t · dirs ((R, 3), (R, 3), (R, S) → (R, S)), without forming them,
+    and the flat index of each point's nearest voxel corner (R, S)."""
     occ = field.occupancy
     z, y, x = occ.shape
     dims = torch.tensor([x, y, z], device=t.device, dtype=t.dtype)
@@ -109,11 +110,16 @@ def _occupied_along(field: FieldTensors, origins: Tensor, dirs: Tensor, t: Tenso
     for axis, stride in ((0, 1), (1, x), (2, x * y)):
         i = torch.round(a[:, axis : axis + 1] + t * b[:, axis : axis + 1]).clamp(0, float(dims[axis] - 1))
         flat += i.long() * stride
-    return occ.reshape(-1)[flat]
+    return occ.reshape(-1)[flat], flat
 
 
 def render_rays(
-    field: FieldTensors, origins: Tensor, dirs: Tensor, background: Tensor, jitter: Tensor | None = None
+    field: FieldTensors,
+    origins: Tensor,
+    dirs: Tensor,
+    background: Tensor,
+    jitter: Tensor | None = None,
+    stats: dict[str, Tensor] | None = None,
 ) -> tuple[Tensor, Tensor]:
     """Colours (R, C) and opacities (R,) of rays (``origins``, unit ``dirs`` (R, 3)).
 
@@ -123,14 +129,18 @@ def render_rays(
     interpolated nor composited (an empty sample leaves the transmittance unchanged, so the occupied samples of each
     ray are packed to the front and composited alone; exact). Samples whose transmittance has fallen below
     ``TRANS_MIN`` are dropped after a density-only pass without gradients (the colour changes by less than
-    ``TRANS_MIN`` × the largest colour difference). A ray that misses the box sees the background."""
+    ``TRANS_MIN`` × the largest colour difference). A ray that misses the box sees the background.
+
+    ``stats``: when given, filled with ``voxels`` (N,) the flat index (into ``occupancy``) of the voxel nearest each
+    composited sample and ``weights`` (N,) its compositing weight T·α (detached), for the occupancy update."""
     s = field.n_samples
     t_near, t_far = ray_aabb(origins, dirs, field.lo, field.hi, field.near)
     length = (t_far - t_near).unsqueeze(-1)  # (R, 1), 0 for rays that miss the box
     steps = torch.arange(s, device=origins.device, dtype=origins.dtype)
     frac = (steps + (0.5 if jitter is None else jitter)) / s
     t = t_near.unsqueeze(-1) + frac * length  # (R, S)
-    keep = _occupied_along(field, origins, dirs, t) & (length > 0)
+    keep, flat = _occupied_along(field, origins, dirs, t)
+    keep &= length > 0
     n_rays, c = keep.shape[0], field.channels
     delta = length / s  # (R, 1)
     rows, cols = keep.nonzero(as_tuple=True)  # row-major: front to back within each ray
@@ -154,7 +164,10 @@ def render_rays(
     sigmas = raw.new_zeros((n_rays, width)).index_put((rows, slot), sig)
     colours = raw.new_zeros((n_rays, width, c)).index_put((rows, slot), col)
     deltas = delta.expand(-1, width)
-    rgb, acc, _ = composite(sigmas, colours, deltas, background.to(raw.dtype))
+    rgb, acc, weights = composite(sigmas, colours, deltas, background.to(raw.dtype))
+    if stats is not None:
+        stats["voxels"] = flat[rows, cols]
+        stats["weights"] = weights.detach()[rows, slot]
     return rgb, acc
 
 

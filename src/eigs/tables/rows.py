@@ -9,6 +9,11 @@ from typing import Any
 
 DEFAULT_ROWS: dict[str, dict[str, str | None]] = {
     "table1": {
+        # the NeRF columns: radiance-field runs (eigs.train.field_methods), not in the default suite's runs
+        "nerf": "nerf",
+        "deblur-nerf": "deblur-nerf",
+        "edi-nerf": "edi-nerf",
+        "e2nerf": "e2nerf",
         "3dgs": "3dgs",
         "deblurring-gs": "deblurring-gs",
         "deblurring-gs+": "deblurring-gs+",

@@ -22,7 +22,7 @@ class FieldOptions:
     """Every option of the voxel-grid field and its training, with its default."""
 
     batch_rays: int = 4096  # rays per step (e2nerf / deblur-nerf: rays rendered, shared among latents / kernel)
-    n_samples: int = 128  # samples per ray inside the box
+    n_samples: int = 128  # samples per ray inside the box at the final grid (fewer on coarser grids, ∝ resolution)
     near: float = 0.05  # nearest distance sampled
     # box: the init.ply points between these quantiles per axis, padded by this fraction of the extent each side
     box_quantile: float = 0.01
@@ -34,15 +34,19 @@ class FieldOptions:
     # σ = softplus(raw + shift) with raw = 0 at the start and the shift chosen so that a fresh voxel has this α over
     # one sample interval (DVGO's alpha_init); the interval is the box diagonal / n_samples
     alpha_init: float = 1e-3
+    # start from the SfM points (init.ply, as the Gaussian methods): voxels next to a point get the points' mean
+    # colour and a density of α = 0.5 over one voxel (not in DVGO / NeRF: it saves the CPU the geometry search)
+    init_from_points: bool = True
     lr_grid: float = 0.1  # Adam on the grid (DVGO), decayed exponentially to lr_grid · lr_decay at the end
     lr_decay: float = 0.1
     tv_density: float = 0.0  # total-variation weights on the raw grid (mean squared neighbour differences)
     tv_colour: float = 0.0
-    # occupancy: every occupancy_every steps from occupancy_start, voxels whose α over one sample interval is below
-    # occupancy_alpha, with no neighbour above it, are skipped (above alpha_init: space no ray asked for is empty)
+    # occupancy: every occupancy_every steps from occupancy_start, voxels none of whose samples since the last update
+    # had a compositing weight T·α of occupancy_weight or more, and no neighbour that had, are skipped (above
+    # alpha_init: space no ray needed, hidden space and space no ray saw are empty)
     occupancy_every: int = 50
     occupancy_start: int = 20
-    occupancy_alpha: float = 2e-3
+    occupancy_weight: float = 2e-3
 
 
 @dataclass(frozen=True)

@@ -27,6 +27,7 @@ import torch
 
 from eigs import __version__
 from eigs.artifacts.field import FIELD_FILE, write_field
+from eigs.artifacts.gaussians import sh_dc_to_rgb
 from eigs.errors import EigsError
 from eigs.metrics.pixel import psnr_torch
 from eigs.render.field import render_image
@@ -78,7 +79,10 @@ class FieldTrainer:
         self.method = make_field_method(data, cfg, device)
         self.opts = self.method.field_opts
         lo, hi = field_box(data.init.means, self.opts)
-        self.model = FieldModel(lo, hi, data.channels, self.opts, device)
+        init = data.init
+        rgb = np.clip(sh_dc_to_rgb(init.f_dc), 0.0, 1.0)
+        rgb = rgb.mean(axis=1, keepdims=True) if data.channels == 1 else rgb
+        self.model = FieldModel(lo, hi, data.channels, self.opts, device, points=init.means, colours=rgb)
         self.schedule = dict(voxel_schedule(self.opts, cfg.steps)[1:])
         self.gen = torch.Generator().manual_seed(cfg.seed)
         self.grid_opt = self._grid_optimizer()

@@ -64,7 +64,7 @@ def _check_field_options(o: FieldOptions, where: str) -> None:
         (0 <= o.box_quantile < 0.5 and o.box_margin >= 0, "box_quantile must lie in [0, 0.5), box_margin >= 0"),
         (8 <= o.voxels_start <= o.voxels_final, "need 8 <= voxels_start <= voxels_final"),
         (all(0 < f <= 1 for f in o.grow_at) and list(o.grow_at) == sorted(o.grow_at), "grow_at: increasing in (0, 1]"),
-        (0 < o.alpha_init < 1 and 0 < o.occupancy_alpha < 1, "alpha_init and occupancy_alpha must lie in (0, 1)"),
+        (0 < o.alpha_init < 1 and 0 < o.occupancy_weight < 1, "alpha_init and occupancy_weight must lie in (0, 1)"),
         (o.lr_grid >= 0 and 0 < o.lr_decay <= 1, "lr_grid must be >= 0 and lr_decay in (0, 1]"),
         (o.tv_density >= 0 and o.tv_colour >= 0 and o.near >= 0, "tv weights and near must be >= 0"),
         (o.occupancy_every >= 1 and o.occupancy_start >= 0, "occupancy_every >= 1, occupancy_start >= 0"),
@@ -105,7 +105,10 @@ class FieldMethod(ABC):
     def render(self, model: FieldModel, origins: Tensor, dirs: Tensor, gen: torch.Generator) -> Tensor:
         """Colours (R, C) with stratified samples (one jitter per ray from ``gen``)."""
         jitter = torch.rand((origins.shape[0], 1), generator=gen).to(self.device)
-        return render_rays(model.tensors(), origins, dirs, self.background, jitter)[0]
+        stats: dict[str, Tensor] = {}
+        rgb = render_rays(model.tensors(), origins, dirs, self.background, jitter, stats)[0]
+        model.record_weights(stats["voxels"], stats["weights"])
+        return rgb
 
     def pixels(self, n: int, gen: torch.Generator) -> tuple[Tensor, Tensor]:
         """``n`` random pixel indices (column, row)."""

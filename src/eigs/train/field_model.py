@@ -41,6 +41,11 @@ def grid_shape(lo: np.ndarray, hi: np.ndarray, voxels: int) -> tuple[int, int, i
     return int(n[2]), int(n[1]), int(n[0])
 
 
+def grid_voxels(lo: np.ndarray, hi: np.ndarray, voxels: int) -> int:
+    """Corner count of the grid :func:`grid_shape` gives for ``voxels``."""
+    return int(np.prod(grid_shape(lo, hi, voxels)))
+
+
 def voxel_schedule(opts: FieldOptions, steps: int) -> list[tuple[int, int]]:
     """(step, voxels) of every growth: voxels_start at step 0, then geometric steps to voxels_final."""
     k = len(opts.grow_at)
@@ -54,7 +59,18 @@ def voxel_schedule(opts: FieldOptions, steps: int) -> list[tuple[int, int]]:
 class FieldModel:
     """The grid as a leaf tensor plus the box and the occupancy mask (not trained)."""
 
-    def __init__(self, lo: np.ndarray, hi: np.ndarray, channels: int, opts: FieldOptions, device: torch.device):
+    def __init__(
+        self,
+        lo: np.ndarray,
+        hi: np.ndarray,
+        channels: int,
+        opts: FieldOptions,
+        device: torch.device,
+        points: np.ndarray | None = None,
+        colours: np.ndarray | None = None,
+    ):
+        """``points`` (N, 3) and ``colours`` (N, channels) in [0, 1]: the SfM points that seed the grid when
+        ``opts.init_from_points``."""
         self.opts = opts
         self.device = device
         self.lo_np, self.hi_np = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
@@ -63,8 +79,40 @@ class FieldModel:
         shape = grid_shape(self.lo_np, self.hi_np, opts.voxels_start)
         self.grid = torch.zeros((1, 1 + channels, *shape), device=device).requires_grad_(True)
         self.occupancy = torch.ones(shape, dtype=torch.bool, device=device)
+        self.max_weight = torch.zeros(shape, device=device)  # per voxel, since the last occupancy update
         sigma0 = -math.log1p(-opts.alpha_init) / self.sample_interval()
         self.density_shift = math.log(math.expm1(sigma0))  # softplus(0 + shift) = sigma0
+        if opts.init_from_points and points is not None and colours is not None and len(points):
+            self.seed_from_points(np.asarray(points, np.float64), np.asarray(colours, np.float64))
+
+    @torch.no_grad()
+    def seed_from_points(self, points: np.ndarray, colours: np.ndarray) -> None:
+        """Voxel corners within one voxel of a point (3³ neighbourhood of its nearest corner) get the mean colour
+        of those points and the density of α = 0.5 over one voxel edge."""
+        z, y, x = self.grid.shape[2:]
+        dims = np.array([x, y, z], np.float64)
+        idx = np.round((points - self.lo_np) / (self.hi_np - self.lo_np) * (dims - 1)).astype(np.int64)
+        inside = np.all((idx >= 0) & (idx < dims.astype(np.int64)), axis=1)
+        idx, colours = idx[inside], colours[inside]
+        if not len(idx):
+            return
+        flat = torch.from_numpy((idx[:, 2] * y + idx[:, 1]) * x + idx[:, 0])
+        count = torch.zeros(z * y * x, dtype=torch.float64)
+        count.index_add_(0, flat, torch.ones(len(flat), dtype=torch.float64))
+        csum = torch.zeros((z * y * x, colours.shape[1]), dtype=torch.float64)
+        csum.index_add_(0, flat, torch.from_numpy(colours))
+        vol = torch.cat([count[:, None], csum], dim=1).T.reshape(1, 1 + colours.shape[1], z, y, x)
+        vol = F.avg_pool3d(vol, kernel_size=3, stride=1, padding=1, count_include_pad=False)[0]
+        near = vol[0] > 0
+        mean = (vol[1:] / vol[:1].clamp_min(1e-12)).clamp(0.02, 0.98)
+        voxel = float(np.min((self.hi_np - self.lo_np) / (dims - 1)))
+        sigma = math.log(2.0) / voxel
+        raw_density = math.log(math.expm1(sigma)) - self.density_shift
+        g = self.grid.detach().clone()
+        g[0, 0][near] = raw_density
+        logit = torch.log(mean / (1 - mean)).to(g.dtype)
+        g[0, 1:][:, near] = logit[:, near]
+        self.grid = g.requires_grad_(True)
 
     @property
     def channels(self) -> int:
@@ -74,9 +122,15 @@ class FieldModel:
     def n_voxels(self) -> int:
         return int(np.prod(self.grid.shape[2:]))
 
+    def n_samples(self) -> int:
+        """Samples per ray on the current grid: ``n_samples`` × its resolution relative to the final grid (≥ 16)."""
+        o = self.opts
+        rel = (self.n_voxels / grid_voxels(self.lo_np, self.hi_np, o.voxels_final)) ** (1.0 / 3.0)
+        return max(min(int(round(o.n_samples * rel)), o.n_samples), min(16, o.n_samples))
+
     def tensors(self) -> FieldTensors:
         o = self.opts
-        return FieldTensors(self.grid, self.lo, self.hi, self.occupancy, self.density_shift, o.n_samples, o.near)
+        return FieldTensors(self.grid, self.lo, self.hi, self.occupancy, self.density_shift, self.n_samples(), o.near)
 
     # ------------------------------------------------------------------ growth and occupancy
     @torch.no_grad()
@@ -85,6 +139,7 @@ class FieldModel:
         shape = grid_shape(self.lo_np, self.hi_np, voxels)
         new = F.interpolate(self.grid.detach(), size=shape, mode="trilinear", align_corners=True)
         occ = F.interpolate(self.occupancy[None, None].float(), size=shape, mode="nearest")[0, 0] > 0
+        self.max_weight = F.interpolate(self.max_weight[None, None], size=shape, mode="nearest")[0, 0]
         self.grid = new.contiguous().requires_grad_(True)
         self.occupancy = occ
 
@@ -93,14 +148,18 @@ class FieldModel:
         return float(np.linalg.norm(self.hi_np - self.lo_np)) / self.opts.n_samples
 
     @torch.no_grad()
+    def record_weights(self, voxels: Tensor, weights: Tensor) -> None:
+        """Keep the largest compositing weight of each voxel's samples (flat voxel indices, weights (N,))."""
+        self.max_weight.view(-1).scatter_reduce_(0, voxels, weights.to(self.max_weight.dtype), reduce="amax")
+
+    @torch.no_grad()
     def update_occupancy(self) -> float:
-        """Mark occupied the voxels whose α over one sample interval reaches ``occupancy_alpha``, dilated by one
-        voxel (max-pool 3³). Returns the occupied fraction."""
-        sig = F.softplus(self.grid[0, 0] + self.density_shift)
-        alpha = -torch.expm1(-sig * self.sample_interval())
-        occ = alpha >= self.opts.occupancy_alpha
+        """Mark occupied the voxels a sample of which had a compositing weight of ``occupancy_weight`` or more since
+        the last update, dilated by one voxel (max-pool 3³); start a new record. Returns the occupied fraction."""
+        occ = self.max_weight >= self.opts.occupancy_weight
         occ = F.max_pool3d(occ[None, None].float(), kernel_size=3, stride=1, padding=1)[0, 0] > 0
         self.occupancy = occ
+        self.max_weight = torch.zeros_like(self.max_weight)
         return float(occ.float().mean())
 
     # ------------------------------------------------------------------ regularisers, export
@@ -121,16 +180,18 @@ class FieldModel:
             hi=self.hi_np.copy(),
             occupancy=self.occupancy.cpu().numpy().astype(bool),
             density_shift=float(self.density_shift),
-            n_samples=int(o.n_samples),
+            n_samples=self.n_samples(),
             near=float(o.near),
         )
 
     def state_dict(self) -> dict:
-        return {"grid": self.grid.detach().cpu(), "occupancy": self.occupancy.cpu()}
+        return {"grid": self.grid.detach().cpu(), "occupancy": self.occupancy.cpu(),
+                "max_weight": self.max_weight.cpu()}  # fmt: skip
 
     def load_state_dict(self, state: dict) -> None:
         self.grid = state["grid"].to(self.device).requires_grad_(True)
         self.occupancy = state["occupancy"].to(self.device)
+        self.max_weight = state["max_weight"].to(self.device)
 
 
 def lr_at(opts: FieldOptions, step: int, steps: int) -> float:

@@ -1,5 +1,5 @@
-"""``eigs render``: render a trained run's ``model.ply`` at the test cameras, the training views' reference poses
-or an orbit, write 8-bit PNGs and report frames per second."""
+"""``eigs render``: render a trained run's model (``model.ply``, or ``model.npz`` of a field run) at the test
+cameras, the training views' reference poses or an orbit, write 8-bit PNGs and report frames per second."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ HELP = "render a trained run (test cameras, training views or an orbit) to PNGs 
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("run", help="run folder (model.ply, config.json)")
+    p.add_argument("run", help="run folder (model.ply or model.npz, config.json)")
     p.add_argument("scene", help="scene file (scene.h5): camera, background")
     p.add_argument("sfm", help="SfM output directory (poses.h5, test_cameras.h5)")
     p.add_argument("--cameras", default="test", choices=("test", "train", "orbit"), help="which cameras")
@@ -27,9 +27,11 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
     import torch
 
+    from eigs.artifacts.field import FIELD_FILE, read_field
     from eigs.artifacts.gaussians import read_gaussian_ply
     from eigs.artifacts.poses import read_poses, read_test_cameras
     from eigs.errors import EigsError
+    from eigs.render.field import FieldTensors, render_image
     from eigs.scene import read_scene
     from eigs.train.model import GaussianModel
     from eigs.util.atomic import atomic_path
@@ -46,10 +48,15 @@ def run(args: argparse.Namespace) -> int:
     except (ValueError, KeyError, TypeError) as err:
         raise EigsError(cfg_path, f"unreadable run config ({err})") from None
     scene = read_scene(args.scene, events=False)
-    cloud = read_gaussian_ply(run_dir / "model.ply")
     device = torch.device("cuda" if args.device == "cuda" or (args.device == "auto" and torch.cuda.is_available())
                           else "cpu")  # fmt: skip
-    model = GaussianModel.from_cloud(cloud, sh_degree, scene.channels, device)
+    field: FieldTensors | None = None
+    if (run_dir / FIELD_FILE).is_file():
+        field = FieldTensors.from_arrays(read_field(run_dir / FIELD_FILE), device)
+        size = {"n_voxels": field.n_voxels}
+    else:
+        model = GaussianModel.from_cloud(read_gaussian_ply(run_dir / "model.ply"), sh_degree, scene.channels, device)
+        size = {"n_gaussians": len(model)}
     c = scene.channels
     bg = torch.tensor(np.asarray(scene.background if scene.background is not None else np.zeros(c), np.float32))
     poses = read_poses(args.sfm)
@@ -73,13 +80,17 @@ def run(args: argparse.Namespace) -> int:
     with torch.no_grad(), atomic_path(args.output, directory=True) as tmp:
         for i in range(len(c2w)):
             t0 = time.perf_counter()
-            img, _, _ = model.render(torch.from_numpy(c2w[i]), torch.from_numpy(ks[i]).float(), w, h, bg.to(device))
+            k = torch.from_numpy(ks[i]).float().to(device)
+            if field is not None:
+                img = render_image(field, torch.from_numpy(c2w[i]), k, w, h, bg.to(device))
+            else:
+                img, _, _ = model.render(torch.from_numpy(c2w[i]), k, w, h, bg.to(device))
             times.append(time.perf_counter() - t0)
             write_png(tmp / names[i], img.clamp(0, 1).cpu().numpy())
         fps = len(times) / max(sum(times), 1e-12)
         report = {"cameras": args.cameras, "frames": len(times), "fps": fps, "mean_ms": 1e3 * float(np.mean(times)),
-                  "n_gaussians": len(model), "width": w, "height": h, "device": str(device)}  # fmt: skip
+                  **size, "width": w, "height": h, "device": str(device)}  # fmt: skip
         (tmp / "render_report.json").write_text(json.dumps(report, indent=2) + "\n")
-    log.info("rendered %d %s frames to %s: %.1f FPS (%.2f ms per frame, %d Gaussians)", len(times), args.cameras,
-             args.output, fps, report["mean_ms"], len(model))  # fmt: skip
+    log.info("rendered %d %s frames to %s: %.1f FPS (%.2f ms per frame, %s)", len(times), args.cameras,
+             args.output, fps, report["mean_ms"], size)  # fmt: skip
     return 0
