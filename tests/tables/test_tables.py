@@ -195,3 +195,15 @@ def test_table_rows_defaults_and_overrides():
     # every default row key is a paper row or the oracle
     for name, mapping in DEFAULT_ROWS.items():
         assert set(mapping) - {"oracle", "edi-3dgs"} <= set(TABLES[name]["rows"]), name
+
+
+def test_distance_to_oracle_is_paired_over_the_scenes_both_runs_have(metrics_files, tmp_path):
+    """A run on one scene of two is compared with the oracle on that scene, not with the oracle's mean."""
+    only = write_metrics(tmp_path / "extra", "partial", "alpha", "eigs", 29.0, 0.93, 0.06, 100.0)
+    t1 = build_tables({"table1": {"eigs": "partial", "oracle": "oracle"}}, summarise([*metrics_files, only]))[0]
+    assert row(t1, "eigs").d_oracle["psnr"] == pytest.approx(29.0 - 30.0)  # oracle on alpha: 30.0 (mean 30.5)
+    assert row(t1, "eigs").d_oracle["lpips"] == pytest.approx(0.06 - 0.05)
+
+
+def test_brace_pattern_keeps_absolute_paths_absolute():
+    assert brace_pattern(["/tmp/x/a/run", "/tmp/x/b/run"]) == "/tmp/x/{a,b}/run"

@@ -153,9 +153,15 @@ def build_table(name: str, mapping: dict[str, str | None], runs: dict[str, RunSu
         for k in ORACLE_DELTAS:
             if k not in r.cells:
                 continue
-            o = oracle_rows[0].cells[k].ours if oracle_rows else None
-            v = r.cells[k].ours
-            r.d_oracle[k] = v - o if v is not None and o is not None else None
+            r.d_oracle[k] = None
+            if not oracle_rows or r.summary is None:
+                continue
+            # paired: the mean over the scenes both runs have of (ours − oracle), so a run on fewer scenes is
+            # compared with the oracle on the same scenes
+            mine, theirs = r.summary.scene_values(k), oracle_rows[0].summary.scene_values(k)
+            common = sorted(set(mine) & set(theirs))
+            if common:
+                r.d_oracle[k] = sum(mine[s] - theirs[s] for s in common) / len(common)
     return Table(name, spec["title"], spec["row_header"], columns, rows)
 
 

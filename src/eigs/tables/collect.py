@@ -47,6 +47,21 @@ class RunSummary:
     sources: list[str] = field(default_factory=list)
     per_scene: dict[str, dict[str, Any]] = field(default_factory=dict)
 
+    def scene_values(self, col: str) -> dict[str, float]:
+        """Scene → this run's value of column ``col`` on that scene (finite values only)."""
+        out: dict[str, float] = {}
+        for scene, d in self.per_scene.items():
+            if col in RUN_COLUMNS:
+                v = d.get(RUN_COLUMNS[col])
+            elif col in {**SYNTHETIC_COLUMNS, **REAL_COLUMNS}:
+                grp, key = {**SYNTHETIC_COLUMNS, **REAL_COLUMNS}[col]
+                v = d["metrics"].get(grp, {}).get(key)
+            else:
+                v = None
+            if v is not None and math.isfinite(float(v)):
+                out[scene] = float(v)
+        return out
+
     def source_pattern(self) -> str:
         """The run folders as one brace pattern, e.g. ``results/{chair,tree}/b4/eigs`` (exact shell expansion)."""
         return brace_pattern(self.sources)
@@ -64,7 +79,7 @@ def brace_pattern(paths: list[str]) -> str:
         if len(differ) == 1:
             i = differ[0]
             names = sorted({p[i] for p in parts})
-            return "/".join([*parts[0][:i], "{" + ",".join(names) + "}", *parts[0][i + 1 :]])
+            return str(Path(*parts[0][:i], "{" + ",".join(names) + "}", *parts[0][i + 1 :]))
     return ";".join(sorted(paths))
 
 

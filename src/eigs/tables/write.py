@@ -106,7 +106,8 @@ def to_markdown(t: Table) -> str:
 
 NOTE = (
     "Each cell: ours (the paper's value); **best**, <u>second best</u> among the methods (the oracle row, trained on "
-    "the sharp ground truth, is an upper bound and not ranked); Δ oracle PSNR = ours − oracle (dB); PSNR / SSIM "
+    "the sharp ground truth, is an upper bound and not ranked); Δ oracle PSNR = ours − oracle (dB), the mean over the "
+    "scenes both runs have; PSNR / SSIM "
     "(3dgs lineage) / LPIPS-alex are means over the synthetic scenes at the novel views, BRISQUE over the scenes "
     "without ground truth; train time and FPS are means per scene; source: the run folders."
 )
