@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import json
+import re
 import subprocess
 import sys
 
@@ -123,6 +124,24 @@ def test_cli_train_render_and_evaluate_loader(toy, tmp_path):
     g = load_model(run, 0, 3, torch.device("cpu"))
     assert isinstance(g, FieldTensors)
     tc = read_test_cameras(toy.sfm)
-    images, times = render_uint8(g, tc.c2w[:2], tc.K[:2], 64, 48, np.zeros(3))
+    from eigs.scene import read_scene
+
+    bg = read_scene(toy.scene, events=False).background
+    images, times = render_uint8(g, tc.c2w[:2], tc.K[:2], 64, 48, np.zeros(3) if bg is None else bg)
     np.testing.assert_array_equal(images[0], cv2.imread(str(out / "test_0000.png"))[..., ::-1])
     assert len(times) == 2
+
+
+def test_field_runs_in_the_dag_write_and_evaluate_model_npz(tmp_path):
+    from tests.train.test_workflow_train import dry_run
+
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text("scenes:\n  toy: {builtin: toy}\nruns:\n  g: {method: 3dgs}\n  n: {method: nerf}\n"
+                   "  e: {method: e2nerf, options: {steps: 9}}\n")  # fmt: skip
+    out = dry_run(f"--configfile={cfg}")
+    field_jobs = re.findall(r"rule train_field:\n(?:    .*\n)*?    output: (results/\S+)/model\.npz", out)
+    gauss_jobs = re.findall(r"rule train:\n(?:    .*\n)*?    output: (results/\S+)/model\.ply", out)
+    assert sorted(field_jobs) == ["results/toy/b4/e", "results/toy/b4/n"] and gauss_jobs == ["results/toy/b4/g"]
+    assert """--config '{"method":"e2nerf","steps":9}'""" in out
+    evals = re.findall(r"rule evaluate:\n    input: (results/toy/b4/\w+/model\.\w+)", out)
+    assert sorted(evals) == ["results/toy/b4/e/model.npz", "results/toy/b4/g/model.ply", "results/toy/b4/n/model.npz"]

@@ -24,12 +24,15 @@ class FieldOptions:
     batch_rays: int = 4096  # rays per step (e2nerf / deblur-nerf: rays rendered, shared among latents / kernel)
     n_samples: int = 128  # samples per ray inside the box at the final grid (fewer on coarser grids, ∝ resolution)
     near: float = 0.05  # nearest distance sampled
-    # box: the init.ply points between these quantiles per axis, padded by this fraction of the extent each side
+    # box: the init.ply points between these quantiles per axis, padded by box_margin × the extent each side, grown
+    # to hold every training camera centre ± box_camera_margin (SfM finds few points on surfaces seen at grazing
+    # angles, such as the upper walls of a room, which the cameras still see)
     box_quantile: float = 0.01
     box_margin: float = 0.05
+    box_camera_margin: float = 0.5
     # coarse-to-fine: the grid grows from voxels_start to voxels_final in len(grow_at) steps (geometric)
     voxels_start: int = 48**3
-    voxels_final: int = 160**3
+    voxels_final: int = 128**3
     grow_at: tuple[float, ...] = (0.1, 0.2, 0.3, 0.4)
     # σ = softplus(raw + shift) with raw = 0 at the start and the shift chosen so that a fresh voxel has this α over
     # one sample interval (DVGO's alpha_init); the interval is the box diagonal / n_samples

@@ -78,7 +78,7 @@ class FieldTrainer:
         torch.manual_seed(cfg.seed)
         self.method = make_field_method(data, cfg, device)
         self.opts = self.method.field_opts
-        lo, hi = field_box(data.init.means, self.opts)
+        lo, hi = field_box(data.init.means, self.opts, cameras=data.c2w[data.valid][:, :3, 3].numpy())
         init = data.init
         rgb = np.clip(sh_dc_to_rgb(init.f_dc), 0.0, 1.0)
         rgb = rgb.mean(axis=1, keepdims=True) if data.channels == 1 else rgb

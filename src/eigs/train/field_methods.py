@@ -61,7 +61,8 @@ def _dataclass_from(cls: type, values: dict[str, Any], where: str) -> Any:
 def _check_field_options(o: FieldOptions, where: str) -> None:
     checks = [
         (o.batch_rays >= 1 and o.n_samples >= 1, "batch_rays and n_samples must be >= 1"),
-        (0 <= o.box_quantile < 0.5 and o.box_margin >= 0, "box_quantile must lie in [0, 0.5), box_margin >= 0"),
+        (0 <= o.box_quantile < 0.5 and min(o.box_margin, o.box_camera_margin) >= 0,
+         "box_quantile must lie in [0, 0.5), box_margin and box_camera_margin >= 0"),
         (8 <= o.voxels_start <= o.voxels_final, "need 8 <= voxels_start <= voxels_final"),
         (all(0 < f <= 1 for f in o.grow_at) and list(o.grow_at) == sorted(o.grow_at), "grow_at: increasing in (0, 1]"),
         (0 < o.alpha_init < 1 and 0 < o.occupancy_weight < 1, "alpha_init and occupancy_weight must lie in (0, 1)"),

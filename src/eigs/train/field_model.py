@@ -19,9 +19,12 @@ from eigs.render.field import FieldTensors
 from eigs.train.field_config import FieldOptions
 
 
-def field_box(points: np.ndarray, opts: FieldOptions) -> tuple[np.ndarray, np.ndarray]:
+def field_box(
+    points: np.ndarray, opts: FieldOptions, cameras: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """The box of the field: per axis the ``box_quantile`` and 1 − ``box_quantile`` quantiles of the points (N, 3),
-    padded by ``box_margin`` × the extent each side."""
+    padded by ``box_margin`` × the extent each side, then grown to hold the camera centres (M, 3) ±
+    ``box_camera_margin``."""
     p = np.asarray(points, np.float64).reshape(-1, 3)
     p = p[np.all(np.isfinite(p), axis=1)]
     if p.shape[0] < 2:
@@ -30,7 +33,14 @@ def field_box(points: np.ndarray, opts: FieldOptions) -> tuple[np.ndarray, np.nd
     hi = np.quantile(p, 1.0 - opts.box_quantile, axis=0)
     ext = np.maximum(hi - lo, 1e-3 * max(float(np.max(hi - lo)), 1e-6))
     pad = opts.box_margin * ext
-    return lo - pad, hi + pad
+    lo, hi = lo - pad, hi + pad
+    if cameras is not None:
+        c = np.asarray(cameras, np.float64).reshape(-1, 3)
+        c = c[np.all(np.isfinite(c), axis=1)]
+        if c.shape[0]:
+            lo = np.minimum(lo, c.min(axis=0) - opts.box_camera_margin)
+            hi = np.maximum(hi, c.max(axis=0) + opts.box_camera_margin)
+    return lo, hi
 
 
 def grid_shape(lo: np.ndarray, hi: np.ndarray, voxels: int) -> tuple[int, int, int]:
