@@ -16,3 +16,9 @@ class EigsError(Exception):
         self.path = None if path is None else str(path)
         self.problem = problem
         super().__init__(problem if self.path is None else f"{self.path}: {problem}")
+
+
+# What h5py raises when it reads a damaged file: OSError (unreadable data), KeyError (an object it cannot resolve),
+# RuntimeError (bad heap or B-tree signatures), ValueError/TypeError (a damaged datatype or a value of the wrong
+# kind). Readers of HDF5 files catch these around their reads and raise EigsError naming the file.
+H5_READ_ERRORS: tuple[type[Exception], ...] = (OSError, KeyError, RuntimeError, ValueError, TypeError)

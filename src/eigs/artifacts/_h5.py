@@ -8,7 +8,7 @@ from pathlib import Path
 
 import h5py
 
-from eigs.errors import EigsError
+from eigs.errors import H5_READ_ERRORS, EigsError
 
 
 def open_artifact(path: str | os.PathLike, fmt: str, version: int, what: str, stage: str) -> h5py.File:
@@ -21,7 +21,12 @@ def open_artifact(path: str | os.PathLike, fmt: str, version: int, what: str, st
         f = h5py.File(p, "r")
     except OSError as err:
         raise EigsError(p, f"not a readable HDF5 file ({err})") from None
-    if f.attrs.get("format") != fmt or int(f.attrs.get("version", -1)) != version:
+    try:
+        ok = f.attrs.get("format") == fmt and int(f.attrs.get("version", -1)) == version
+    except H5_READ_ERRORS as err:
+        f.close()
+        raise EigsError(p, f"corrupted {what} file, unreadable header ({err})") from None
+    if not ok:
         f.close()
         raise EigsError(p, f"not an eigs {what} file of version {version}")
     return f

@@ -16,7 +16,7 @@ import h5py
 import numpy as np
 
 from eigs.artifacts._h5 import open_artifact
-from eigs.errors import EigsError
+from eigs.errors import H5_READ_ERRORS, EigsError
 from eigs.util.atomic import atomic_path
 
 FORMAT_NAME = "eigs-edi"
@@ -223,7 +223,7 @@ def read_edi(path: str | os.PathLike, *, latent: bool = True) -> EdiResult:
                 threshold_pos_map=f["threshold_pos_map"][()] if "threshold_pos_map" in f else None,
                 threshold_neg_map=f["threshold_neg_map"][()] if "threshold_neg_map" in f else None,
             )
-    except (OSError, KeyError) as err:
+    except H5_READ_ERRORS as err:
         raise EigsError(p, f"corrupted EDI file ({err})") from None
     res.validate(p)
     return res

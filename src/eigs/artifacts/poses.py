@@ -16,7 +16,7 @@ import h5py
 import numpy as np
 
 from eigs.artifacts._h5 import open_artifact
-from eigs.errors import EigsError
+from eigs.errors import H5_READ_ERRORS, EigsError
 from eigs.util.atomic import atomic_path
 
 POSES_FORMAT = "eigs-sfm-poses"
@@ -119,7 +119,7 @@ def read_poses(path: str | os.PathLike) -> LatentPoses:
                 mode=str(f.attrs["mode"]),
                 canonical=f["canonical"][()],
             )
-        except KeyError as err:
+        except H5_READ_ERRORS as err:
             raise EigsError(p, f"corrupted SfM poses file ({err})") from None
     poses.validate(p)
     return poses
@@ -190,7 +190,7 @@ def read_test_cameras(path: str | os.PathLike) -> TestCameras:
                     for n in ("index", "kind", "view", "t_us", "method", "reprojection_error_px", "num_inliers")
                 },
             )
-        except KeyError as err:
+        except H5_READ_ERRORS as err:
             raise EigsError(p, f"corrupted test cameras file ({err})") from None
     cams.validate(p)
     return cams

@@ -14,7 +14,7 @@ from typing import Any
 import h5py
 import numpy as np
 
-from eigs.errors import EigsError
+from eigs.errors import H5_READ_ERRORS, EigsError
 from eigs.scene.model import (
     FORMAT_NAME,
     FORMAT_VERSION,
@@ -48,8 +48,12 @@ def _open_read(path: str | os.PathLike) -> h5py.File:
         f = h5py.File(p, "r")
     except OSError as err:
         raise EigsError(p, f"not a readable HDF5 file ({err})") from None
-    fmt = f.attrs.get("format")
-    version = int(f.attrs.get("version", -1))
+    try:
+        fmt = f.attrs.get("format")
+        version = int(f.attrs.get("version", -1))
+    except H5_READ_ERRORS as err:
+        f.close()
+        raise EigsError(p, f"corrupted scene file, unreadable header ({err})") from None
     if fmt != FORMAT_NAME:
         f.close()
         raise EigsError(p, f"not an eigs scene file (attribute format={fmt!r})")
@@ -273,7 +277,7 @@ def read_scene(path: str | os.PathLike, *, events: bool = True) -> Scene:
                     f["events/p"][()],
                     _opt(f, "events/view_index"),
                 )
-        except (KeyError, OSError, ValueError) as err:
+        except H5_READ_ERRORS as err:
             raise EigsError(path, f"corrupted or incomplete scene file ({err})") from None
     validate(str(path), scene)
     return scene
@@ -290,13 +294,16 @@ def read_events(path: str | os.PathLike, start: int = 0, stop: int | None = None
         if "events/t" not in f:
             raise EigsError(path, "the scene has no raw events")
         sl = slice(start, stop)
-        return Events(
-            f["events/x"][sl],
-            f["events/y"][sl],
-            f["events/t"][sl],
-            f["events/p"][sl],
-            _opt(f, "events/view_index"),
-        )
+        try:
+            return Events(
+                f["events/x"][sl],
+                f["events/y"][sl],
+                f["events/t"][sl],
+                f["events/p"][sl],
+                _opt(f, "events/view_index"),
+            )
+        except H5_READ_ERRORS as err:
+            raise EigsError(path, f"corrupted scene file, unreadable events ({err})") from None
 
 
 def event_count(path: str | os.PathLike) -> int:
