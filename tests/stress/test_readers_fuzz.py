@@ -255,3 +255,34 @@ def test_damaged_checkpoints_are_ignored_or_resume_finite(originals, fresh_param
     tr.train_step()  # and training goes on
     for v in tr.model.params.values():
         assert torch.isfinite(v).all()
+
+
+def test_ply_header_damage(originals, tmp_path_factory):
+    """Each property of the header renamed in turn (same length, so the binary body still parses), and an odd
+    number of f_rest properties: a one-line error or a valid cloud, as for any other damage."""
+    fname, data = originals["init"]
+    end = data.index(b"end_header\n") + len(b"end_header\n")
+    header, body = data[:end].decode("ascii"), data[end:]
+    names = [ln.split()[-1] for ln in header.splitlines() if ln.startswith("property")]
+    directory = tmp_path_factory.mktemp("ply")
+    path = directory / fname
+    for name in names:
+        bogus = "q" * len(name)
+        path.write_bytes(header.replace(f" {name}\n", f" {bogus}\n").encode("ascii") + body)
+        try:
+            read_gaussian_ply(path)
+        except EigsError as err:
+            assert_one_line_naming(err, path)
+        else:
+            assert name in ("nx", "ny", "nz"), f"{name} renamed, yet the cloud was read"
+    # one f_rest property (not 3 × ((d+1)² − 1)) in an otherwise valid file
+    import numpy as np
+    from plyfile import PlyData, PlyElement
+
+    fields = [*names[:9], "f_rest_0", *names[9:]]
+    arr = np.zeros(4, dtype=[(f, "<f4") for f in fields])
+    arr["rot_0"] = 1.0
+    PlyData([PlyElement.describe(arr, "vertex")], text=False).write(str(path))
+    with pytest.raises(EigsError) as info:
+        read_gaussian_ply(path)
+    assert_one_line_naming(info.value, path)

@@ -135,10 +135,13 @@ def read_gaussian_ply(path: str | os.PathLike) -> GaussianCloud:
     except Exception as err:  # plyfile raises several types for malformed files
         raise EigsError(p, f"not a readable PLY file with a vertex element ({err})") from None
     names = set(v.data.dtype.names)
-    need = {"x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "rot_0"}
+    need = {"x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2", "rot_0",
+            "rot_1", "rot_2", "rot_3"}  # fmt: skip
     if not need <= names:
         raise EigsError(p, f"not a 3DGS PLY: missing properties {sorted(need - names)}")
-    rest = sorted((n for n in names if n.startswith("f_rest_")), key=lambda s: int(s.split("_")[-1]))
+    rest = [f"f_rest_{i}" for i in range(sum(1 for n in names if n.startswith("f_rest_")))]
+    if not set(rest) <= names or len(rest) % 3:
+        raise EigsError(p, f"not a 3DGS PLY: {len(rest)} f_rest properties, expected f_rest_0.. in a multiple of 3")
     n = len(v.data)
 
     def col(name: str) -> np.ndarray:
