@@ -286,3 +286,37 @@ def test_ply_header_damage(originals, tmp_path_factory):
     with pytest.raises(EigsError) as info:
         read_gaussian_ply(path)
     assert_one_line_naming(info.value, path)
+
+
+@pytest.mark.parametrize("damage_kind", [("truncate", 0.5), ("zero-block", 112)])
+def test_stages_given_a_damaged_input_exit_2_on_one_line_and_write_nothing(damage_kind, tmp_path, capsys):
+    """``eigs edi`` on a damaged scene.h5 and ``eigs train`` on a damaged edi.h5 / poses.h5 / init.ply: exit code
+    2, one line on stderr naming the file, and no output (nor temporary file) left in the output directory."""
+    from eigs.cli import main
+
+    scene = toy.write_all(tmp_path / "in")["scene"]
+    kind, where = damage_kind
+
+    def spoil(p: Path) -> Path:
+        data = p.read_bytes()
+        off = int(where * len(data)) if kind == "truncate" else where
+        p.write_bytes(damage(data, (kind, off, b"\0" * 8)))
+        return p
+
+    def run(argv: list[str], bad: Path, out_dir: Path) -> None:
+        capsys.readouterr()
+        assert main(argv) == 2
+        err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+        assert len(err) == 1 and err[0].startswith(f"eigs {argv[0]}: error: {bad}: "), err
+        assert not out_dir.exists() or not any(out_dir.iterdir()), sorted(out_dir.iterdir())
+
+    out = tmp_path / "out"
+    out.mkdir()
+    bad_scene = spoil(scene)
+    run(["edi", str(bad_scene), "-o", str(out / "edi.h5"), "--latent-dir", str(out / "latent")], bad_scene, out)
+    for name in ("edi", "poses", "init"):
+        fresh = toy.write_all(tmp_path / name)
+        bad = spoil(fresh[name])
+        argv = ["train", str(fresh["scene"]), str(fresh["edi"]), str(fresh["poses"].parent), str(fresh["init"]),
+                "-o", str(out / "run"), "--config", '{"steps": 2}']  # fmt: skip
+        run(argv, bad, out)
