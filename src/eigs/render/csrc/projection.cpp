@@ -136,7 +136,17 @@ bool project_one(const S* mean, const S* quat, const S* scale, S opacity, const 
     p.cov2[0] = s00;
     p.cov2[1] = s01;
     p.cov2[2] = s11;
-    p.det = s00 * s11 - s01 * s01;
+    // det by Cauchy-Binet on T = J R_w M (2x3, cov2 = T T^T + blur I): the 2x2 minors of T squared, plus
+    // blur * trace + blur^2. The direct s00 s11 - s01^2 cancels catastrophically in float32 for needles (a long
+    // axis of L px leaves an absolute error ~ L^4 * 6e-8 against a determinant ~ 0.3 L^2).
+    S RM[9], T[6];
+    mat3_mul(cam.R, p.M, RM);
+    for (int r = 0; r < 2; ++r)
+        for (int j = 0; j < 3; ++j)
+            T[r * 3 + j] = p.J[r * 3] * RM[j] + p.J[r * 3 + 1] * RM[3 + j] + p.J[r * 3 + 2] * RM[6 + j];
+    const S m01 = T[0] * T[4] - T[1] * T[3], m02 = T[0] * T[5] - T[2] * T[3], m12 = T[1] * T[5] - T[2] * T[4];
+    const S tr = T[0] * T[0] + T[1] * T[1] + T[2] * T[2] + T[3] * T[3] + T[4] * T[4] + T[5] * T[5];
+    p.det = (m01 * m01 + m02 * m02 + m12 * m12) + S(kBlur) * tr + S(kBlur) * S(kBlur);
     if (!(p.det > S(0)) || !finite(p.det)) return false;
     const S idet = S(1) / p.det;
     p.conic[0] = s11 * idet;
