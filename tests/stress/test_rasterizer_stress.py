@@ -149,7 +149,7 @@ def test_1e5_gaussians_on_one_pixel_match_the_compositing_closed_form():
     t = (1 - a) ** np.arange(n_front)
     ref = (colors.detach().double().numpy()[order] * (a * t)[:, None]).sum(0) + (1 - a) ** n_front * bg.double().numpy()
     assert np.abs(image[2, 3].detach().double().numpy() - ref).max() <= 1e-4
-    assert abs(float(alpha[2, 3]) - (1 - (1 - a) ** n_front)) <= 1e-4
+    assert abs(float(alpha.detach()[2, 3]) - (1 - (1 - a) ** n_front)) <= 1e-4
     other = torch.ones(6, 8, dtype=torch.bool)
     other[2, 3] = False
     assert torch.equal(image.detach()[other], bg.expand(6, 8, 3)[other])
