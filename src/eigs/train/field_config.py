@@ -23,7 +23,7 @@ class FieldOptions:
 
     batch_rays: int = 4096  # rays per step (e2nerf / deblur-nerf: rays rendered, shared among latents / kernel)
     n_samples: int = 128  # samples per ray inside the box at the final grid (fewer on coarser grids, ∝ resolution)
-    near: float = 0.05  # nearest distance sampled
+    near: float = 0.3  # nearest distance sampled (canonical frame: RMS camera radius 1; no floaters at the lens)
     # box: the init.ply points between these quantiles per axis, padded by box_margin × the extent each side, grown
     # to hold every training camera centre ± box_camera_margin (SfM finds few points on surfaces seen at grazing
     # angles, such as the upper walls of a room, which the cameras still see)
@@ -32,7 +32,7 @@ class FieldOptions:
     box_camera_margin: float = 0.5
     # coarse-to-fine: the grid grows from voxels_start to voxels_final in len(grow_at) steps (geometric)
     voxels_start: int = 48**3
-    voxels_final: int = 128**3
+    voxels_final: int = 96**3
     grow_at: tuple[float, ...] = (0.1, 0.2, 0.3, 0.4)
     # σ = softplus(raw + shift) with raw = 0 at the start and the shift chosen so that a fresh voxel has this α over
     # one sample interval (DVGO's alpha_init); the interval is the box diagonal / n_samples
@@ -42,8 +42,10 @@ class FieldOptions:
     init_from_points: bool = True
     lr_grid: float = 0.1  # Adam on the grid (DVGO), decayed exponentially to lr_grid · lr_decay at the end
     lr_decay: float = 0.1
-    tv_density: float = 0.0  # total-variation weights on the raw grid (mean squared neighbour differences)
-    tv_colour: float = 0.0
+    # total-variation weights on the raw grid (mean squared neighbour differences; Plenoxels' smoothness prior): 24
+    # views do not determine a voxel grid, and without it the novel views fill with floaters (docs/training.md)
+    tv_density: float = 1e-2
+    tv_colour: float = 1e-3
     # occupancy: every occupancy_every steps from occupancy_start, voxels none of whose samples since the last update
     # had a compositing weight T·α of occupancy_weight or more, and no neighbour that had, are skipped (above
     # alpha_init: space no ray needed, hidden space and space no ray saw are empty)
