@@ -26,7 +26,7 @@ from eigs.train.methods import method_names
 
 # small and fast: the toy scene is 64 × 48 with 8 training views
 SMALL = {"batch_rays": 1024, "n_samples": 48, "voxels_start": 16**3, "voxels_final": 40**3, "grow_at": [0.25, 0.5]}
-STEPS = 240
+STEPS = 120
 
 
 @pytest.fixture(scope="module")
@@ -53,7 +53,7 @@ def test_each_method_improves_held_out_psnr(data, tmp_path, method):
     res = train_field(data, cfg, run)
     rows = list(csv.DictReader((run / "train_log.csv").open()))
     after = float(rows[-1]["psnr_novel"])
-    assert after > before + 4.0, (method, before, after)
+    assert after > before + 6.0, (method, before, after)  # measured +11 to +12 dB (9.2 → 20.5–21.9 dB)
     assert {"step", "wall_s", "loss", "mse", "n_voxels", "occupied", "psnr_novel", "psnr_blur"} <= set(rows[0])
     assert int(rows[-1]["step"]) == STEPS and int(rows[-1]["n_voxels"]) == res.model.n_voxels
     doc = json.loads((run / "config.json").read_text())
