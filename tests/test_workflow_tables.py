@@ -63,8 +63,8 @@ def test_default_config_schedules_every_table_variant():
     proc = snakemake("all", "-n", "--forceall", "--cores", "2", "--configfile=config/config.yaml")
     assert proc.returncode == 0, proc.stdout + proc.stderr
     counts = job_counts(proc.stdout)
-    # 20 runs on 6 scenes, each evaluated; EDI/SfM/init at B = 4, 6, 8
-    assert counts["train"] == 120 and counts["evaluate"] == 120
+    # 24 runs on 6 scenes (20 Gaussian, 4 radiance-field), each evaluated; EDI/SfM/init at B = 4, 6, 8
+    assert counts["train"] == 120 and counts["train_field"] == 24 and counts["evaluate"] == 144
     assert counts["edi"] == counts["sfm"] == counts["init"] == 18
     assert counts["tables"] == counts["figures"] == 1
     # shared runs are trained once: eigs feeds Tables I-V from one folder per scene
