@@ -93,8 +93,10 @@ def test_e2nerf_config_dry_runs_on_an_exported_layout(tmp_path):
     proc = snakemake("all", "-n", "--forceall", "--cores", "2", f"--configfile={cfg}")
     assert proc.returncode == 0, proc.stdout + proc.stderr
     counts = job_counts(proc.stdout)
-    # 11 scenes ingested; 18 runs, oracle only on the 6 synthetic scenes: 17·11 + 6 = 193
-    assert counts["ingest"] == 11 and counts["train"] == 193 and counts["evaluate"] == 193
+    # 11 scenes ingested; 18 Gaussian runs, oracle only on the 6 synthetic scenes: 17·11 + 6 = 193; 4 field runs:
+    # 4·11 = 44
+    assert counts["ingest"] == 11 and counts["train"] == 193 and counts["train_field"] == 44
+    assert counts["evaluate"] == 193 + 44
     assert "--format e2nerf-synthetic" in proc.stdout and "--format e2nerf-real" in proc.stdout
     assert '"steps":30000' in proc.stdout
     assert '"6":null' in proc.stdout  # Table III's N = 6, 8 rows: paper values only
