@@ -17,7 +17,6 @@ import logging
 import math
 import platform
 import shutil
-import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -28,16 +27,14 @@ import torch
 from eigs import __version__
 from eigs.artifacts.field import FIELD_FILE, write_field
 from eigs.artifacts.gaussians import sh_dc_to_rgb
-from eigs.errors import EigsError
 from eigs.metrics.pixel import psnr_torch
 from eigs.render.field import render_image
 from eigs.train.config import TrainConfig
 from eigs.train.data import TrainData
 from eigs.train.field_methods import FieldMethod, make_field_method
 from eigs.train.field_model import FieldModel, field_box, lr_at, voxel_schedule
-from eigs.train.loop import log_csv, partial_dir_of
+from eigs.train.loop import log_csv, partial_dir_of, run_steps
 from eigs.util.atomic import atomic_path
-from eigs.util.progress import progress
 
 log = logging.getLogger(__name__)
 
@@ -206,32 +203,16 @@ def train_field(
     m = tr.model
     log.info("%s: %d steps, box %s .. %s, grid %s, device %s", cfg.method, cfg.steps, np.round(m.lo_np, 3),
              np.round(m.hi_np, 3), tuple(m.grid.shape[2:]), device)  # fmt: skip
-    for _ in progress(range(tr.step, cfg.steps), desc=f"train {cfg.method}", total=cfg.steps - tr.step, unit="step"):
-        t0 = time.perf_counter()
-        tr.train_step()
-        tr.wall += time.perf_counter() - t0
-        if tr.bad >= cfg.max_bad_steps:
-            tr.save_checkpoint(ckpt)
-            raise EigsError(
-                run_dir,
-                f"{tr.bad} consecutive steps had a non-finite loss or gradient (last at step {tr.step}); the last "
-                f"good state is in {ckpt}",
-            )
-        s = tr.step
-        evaluate = data.held_out is not None and cfg.eval_every and (s % cfg.eval_every == 0 or s == cfg.steps)
-        if s % cfg.log_every == 0 or s == cfg.steps or evaluate:
-            row: dict[str, Any] = {"step": s, "wall_s": round(tr.wall, 4), **tr._last, "n_voxels": tr.model.n_voxels,
-                                   "occupied": round(tr.occupied, 4)}  # fmt: skip
-            if evaluate:
-                row.update(field_held_out_psnr(tr.model, data, device))
-                log.info("step %d  %.1f s  %d voxels (%.1f%% occupied)  PSNR novel %.2f dB", s, tr.wall,
-                         tr.model.n_voxels, 100 * tr.occupied, row["psnr_novel"])  # fmt: skip
-            tr.rows.append(row)
-        if s % cfg.checkpoint_every == 0 and s < cfg.steps:
-            tr.save_checkpoint(ckpt)
-        if stop_after is not None and s >= stop_after:
-            tr.save_checkpoint(ckpt)
-            return FieldRunResult(tr.model, tr.method, tr.rows, tr.wall, tr.skipped)
+    stopped = run_steps(
+        tr, cfg, ckpt, run_dir, stop_after,
+        size=lambda: {"n_voxels": tr.model.n_voxels, "occupied": round(tr.occupied, 4)},
+        held_out=lambda s: field_held_out_psnr(tr.model, data, device),
+        describe=lambda s, row: f"step {s}  {tr.wall:.1f} s  {tr.model.n_voxels} voxels "
+        f"({100 * tr.occupied:.1f}% occupied)  PSNR novel {row['psnr_novel']:.2f} dB",
+        has_held_out=data.held_out is not None,
+    )  # fmt: skip
+    if stopped:
+        return FieldRunResult(tr.model, tr.method, tr.rows, tr.wall, tr.skipped)
     write_field_run(tr, run_dir, inputs or {})
     shutil.rmtree(partial, ignore_errors=True)
     return FieldRunResult(tr.model, tr.method, tr.rows, tr.wall, tr.skipped)

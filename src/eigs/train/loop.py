@@ -15,6 +15,7 @@ import logging
 import math
 import shutil
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -255,6 +256,37 @@ def train(
     )  # fmt: skip
     tr._last = {}
     tr.warm_up()
+    stopped = run_steps(
+        tr, cfg, ckpt, run_dir, stop_after,
+        size=lambda: {"n_gaussians": len(tr.model)},
+        held_out=lambda s: held_out_psnr(tr.model, data.held_out, data, tr.sh_degree_at(s), device),  # type: ignore[arg-type]
+        describe=lambda s, row: f"step {s}  {tr.wall:.1f} s  {len(tr.model)} Gaussians  PSNR novel "
+        f"{row['psnr_novel']:.2f} dB",
+        has_held_out=data.held_out is not None,
+    )  # fmt: skip
+    if stopped:
+        return RunResult(tr.model, tr.method, tr.rows, tr.wall, tr.skipped)
+    write_run(tr, run_dir, inputs or {})
+    shutil.rmtree(partial, ignore_errors=True)
+    return RunResult(tr.model, tr.method, tr.rows, tr.wall, tr.skipped)
+
+
+def run_steps(
+    tr: Any,
+    cfg: TrainConfig,
+    ckpt: Path,
+    run_dir: Path,
+    stop_after: int | None,
+    *,
+    size: Callable[[], dict[str, Any]],
+    held_out: Callable[[int], dict[str, Any]],
+    describe: Callable[[int, dict[str, Any]], str],
+    has_held_out: bool,
+) -> bool:
+    """The step loop every trainer shares (Gaussian and field): ``tr.train_step()`` from ``tr.step`` to
+    ``cfg.steps`` with the wall clock, the non-finite-streak stop, a log row every ``log_every`` steps (``size()``
+    columns, and ``held_out(step)`` every ``eval_every``, logged as ``describe(step, row)``), checkpoints every
+    ``checkpoint_every``. True when it left at ``stop_after`` (checkpoint written, no outputs)."""
     for _ in progress(range(tr.step, cfg.steps), desc=f"train {cfg.method}", total=cfg.steps - tr.step, unit="step"):
         t0 = time.perf_counter()
         tr.train_step()
@@ -267,22 +299,19 @@ def train(
                 f"good state is in {ckpt}",
             )
         s = tr.step
-        evaluate = data.held_out is not None and cfg.eval_every and (s % cfg.eval_every == 0 or s == cfg.steps)
+        evaluate = has_held_out and cfg.eval_every and (s % cfg.eval_every == 0 or s == cfg.steps)
         if s % cfg.log_every == 0 or s == cfg.steps or evaluate:
-            row: dict[str, Any] = {"step": s, "wall_s": round(tr.wall, 4), **tr._last, "n_gaussians": len(tr.model)}
+            row: dict[str, Any] = {"step": s, "wall_s": round(tr.wall, 4), **tr._last, **size()}
             if evaluate:
-                row.update(held_out_psnr(tr.model, data.held_out, data, tr.sh_degree_at(s), device))  # type: ignore[arg-type]
-                log.info("step %d  %.1f s  %d Gaussians  PSNR novel %.2f dB", s, tr.wall, len(tr.model),
-                         row["psnr_novel"])  # fmt: skip
+                row.update(held_out(s))
+                log.info("%s", describe(s, row))
             tr.rows.append(row)
         if s % cfg.checkpoint_every == 0 and s < cfg.steps:
             tr.save_checkpoint(ckpt)
         if stop_after is not None and s >= stop_after:
             tr.save_checkpoint(ckpt)
-            return RunResult(tr.model, tr.method, tr.rows, tr.wall, tr.skipped)
-    write_run(tr, run_dir, inputs or {})
-    shutil.rmtree(partial, ignore_errors=True)
-    return RunResult(tr.model, tr.method, tr.rows, tr.wall, tr.skipped)
+            return True
+    return False
 
 
 def log_csv(rows: list[dict[str, Any]], fixed: tuple[str, ...] = LOG_COLUMNS) -> str:
