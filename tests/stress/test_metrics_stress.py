@@ -19,6 +19,7 @@ from hypothesis import strategies as st
 
 from eigs.errors import EigsError
 from eigs.metrics.pixel import K1, K2, SSIM_MODES, ssim, ssim_torch
+from tests.metrics.conftest import resources_dir  # noqa: F401  (the LPIPS/BRISQUE model files fixture)
 from tests.stress.budget import stress
 
 LEVELS = st.sampled_from([0.0, 1 / 255, 0.5, 254 / 255, 1.0]) | st.floats(0.0, 1.0)
@@ -80,22 +81,11 @@ def test_dssim_float32_on_constants_is_within_its_bound_with_finite_gradients(a,
     assert abs(s32.item() - s64.item()) <= 2e-4
 
 
-@pytest.fixture(scope="module")
-def resources_dir():
-    from eigs.metrics import resources
-    from tests.conftest import require
-
-    root = resources.default_resources_dir()
-    try:
-        resources.prepare(root)
-    except resources.DownloadError as err:
-        require(False, f"LPIPS/BRISQUE model files unavailable: {err}")
-    return root
 
 
 @stress(4)
 @given(a=LEVELS, b=LEVELS, net=st.sampled_from(["alex", "vgg"]))
-def test_lpips_of_constant_images(resources_dir, a, b, net):
+def test_lpips_of_constant_images(resources_dir, a, b, net):  # noqa: F811
     from eigs.metrics.perceptual import lpips
 
     x, y = np.full((64, 64, 3), a), np.full((64, 64, 3), b)
@@ -107,7 +97,7 @@ def test_lpips_of_constant_images(resources_dir, a, b, net):
 
 @stress(6)
 @given(level=st.integers(0, 255), channels=st.sampled_from([1, 3]), variant=st.sampled_from(["original", "opencv"]))
-def test_brisque_on_a_constant_image_is_the_clear_error(resources_dir, level, channels, variant):
+def test_brisque_on_a_constant_image_is_the_clear_error(resources_dir, level, channels, variant):  # noqa: F811
     from eigs.metrics.noreference import brisque
 
     with pytest.raises(EigsError, match="constant image") as info:
