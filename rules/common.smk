@@ -9,6 +9,7 @@ import shlex
 from snakemake.utils import validate
 
 from eigs.events.options import DEFAULT_BINS
+from eigs.sfm.options import SfmConfig
 from eigs.train.field_config import FIELD_METHODS
 
 
@@ -64,6 +65,23 @@ def ingest_options(wildcards):
 
 # --- sfm / init (rules/sfm.smk) -------------------------------------------------------------------------------
 ALL_SCENES = sorted(SCENES)
+
+
+def sfm_given_scenes():
+    """Built-in scenes whose SfM job uses their ground-truth poses instead of COLMAP (the sfm_given jobs); `sfm: mode:
+    given`, or `auto` with `allow_given` (defaults: eigs.sfm.options.SfmConfig). A built-in scene stores
+    ground-truth latent poses, so `eigs sfm` in auto mode would pick given poses anyway (eigs.sfm.run.resolve_mode);
+    their own rule shows the skipped COLMAP mapping in a dry run. Ingested scenes keep the sfm jobs (auto
+    mode decides from the file)."""
+    section, default = config.get("sfm", {}), SfmConfig()
+    mode = section.get("mode", default.mode)
+    if mode == "given" or (mode == "auto" and section.get("allow_given", default.allow_given)):
+        return BUILTIN_SCENES
+    return []
+
+
+SFM_GIVEN_SCENES = sfm_given_scenes()
+SFM_COLMAP_SCENES = [s for s in ALL_SCENES if s not in SFM_GIVEN_SCENES]
 
 
 def sfm_config(wildcards):

@@ -9,7 +9,7 @@ rule sfm:
     output:
         directory("results/{scene}/b{bins}/sfm"),
     wildcard_constraints:
-        scene=names_regex(ALL_SCENES),
+        scene=names_regex(SFM_COLMAP_SCENES),
         bins=r"\d+",
     params:
         config=sfm_config,
@@ -25,6 +25,34 @@ rule sfm:
     shell:
         "eigs sfm {input.scene} {input.edi} --latent-dir {input.latent} -o {output} --config {params.config} "
         "--threads {threads} > {log} 2>&1"
+
+
+# Built-in scenes with ground-truth poses allowed (common.smk SFM_GIVEN_SCENES): the same stage in given mode, no
+# COLMAP mapping (triangulation at the given poses for the initial points; docs/sfm.md).
+rule sfm_given:
+    input:
+        scene="results/{scene}/scene.h5",
+        edi="results/{scene}/b{bins}/edi.h5",
+        latent="results/{scene}/b{bins}/latent",
+    output:
+        directory("results/{scene}/b{bins}/sfm"),
+    wildcard_constraints:
+        scene=names_regex(SFM_GIVEN_SCENES),
+        bins=r"\d+",
+    params:
+        config=sfm_config,
+    log:
+        "logs/sfm/{scene}_b{bins}.log",
+    benchmark:
+        "benchmarks/sfm/{scene}_b{bins}.tsv"
+    threads: threads_for("sfm")
+    resources:
+        mem_mb=6000,
+    conda:
+        "../workflow/envs/eigs.yaml"
+    shell:
+        "eigs sfm {input.scene} {input.edi} --latent-dir {input.latent} -o {output} --config {params.config} "
+        "--mode given --threads {threads} > {log} 2>&1"
 
 
 rule init:

@@ -60,7 +60,8 @@ def test_cluster_dry_run_asks_a_gpu_for_train_and_evaluate_only(tmp_path):
     the same DAG plans gpu=0."""
     slurm = load("slurm")["set-resources"]
     jobs = dry_run(tmp_path / "slurm", "--workflow-profile", str(PROFILES / "slurm"))
-    assert {"synth", "edi", "sfm", "init", "train", "evaluate"} <= set(jobs)
+    assert {"synth", "edi", "init", "train", "evaluate"} <= set(jobs)
+    assert {"sfm", "sfm_given"} & set(jobs)  # the toy scene allows its ground-truth poses: sfm_given
     for rule, planned in jobs.items():
         for res in planned:
             assert res.get("gpu", "0") == ("1" if rule in ("train", "evaluate") else "0"), (rule, res)
