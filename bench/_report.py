@@ -6,7 +6,9 @@ this helper replaces it (or appends it) and stamps the machine and the date.
 
 from __future__ import annotations
 
+import argparse
 import datetime as _dt
+import json
 import os
 import platform
 import re
@@ -40,10 +42,39 @@ def machine() -> str:
     return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}{tv}"
 
 
-def write_section(name: str, title: str, body: str) -> None:
-    """Replace section ``name`` of docs/benchmarks.md with ``body`` (Markdown), stamped with machine and date."""
+def add_out_argument(ap: argparse.ArgumentParser) -> None:
+    """The ``--out DIR`` option of every bench script (the workflow's `bench` target passes results/bench)."""
+    ap.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="write the section to DIR/NAME.md and its measurements to DIR/NAME.json instead of docs/benchmarks.md "
+        "(the workflow's `bench` target; bench/report.py assembles them)",
+    )
+
+
+def _atomic_write(path: Path, text: str) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+def write_section(name: str, title: str, body: str, data: object = None, out: Path | None = None) -> None:
+    """Replace section ``name`` of docs/benchmarks.md with ``body`` (Markdown), stamped with machine and date.
+
+    With ``out`` (a folder), write the stamped section to ``out/NAME.md`` and ``data`` (the measurements, any
+    JSON-serialisable value; ``null`` when not given) to ``out/NAME.json`` instead, leaving docs/benchmarks.md alone.
+    """
     stamp = f"_Measured {_dt.date.today().isoformat()} on {machine()}._"
     block = f"<!-- begin:{name} -->\n## {title}\n\n{stamp}\n\n{body.strip()}\n<!-- end:{name} -->"
+    if out is not None:
+        out = Path(out)
+        out.mkdir(parents=True, exist_ok=True)
+        meta = {"section": name, "title": title, "date": _dt.date.today().isoformat(), "machine": machine(),
+                "load_average": list(os.getloadavg()), "data": data}  # fmt: skip
+        _atomic_write(out / f"{name}.json", json.dumps(meta, indent=1, default=float) + "\n")
+        _atomic_write(out / f"{name}.md", block + "\n")
+        return
     text = DOC.read_text() if DOC.exists() else HEADER
     pattern = re.compile(rf"<!-- begin:{re.escape(name)} -->.*?<!-- end:{re.escape(name)} -->", re.S)
     if pattern.search(text):

@@ -1,13 +1,13 @@
 """EDI benchmark: run time versus error over B ∈ {2, 4, 8, 16} and both modes on the six built-in scenes, threshold
 estimates against the simulator's C, and throughput (latent megapixels/s, binning events/s).
 
-    .venv/bin/python bench/edi.py [--work DIR] [--scenes blocks,chair,...] [--bins 2,4,8,16] [--threads 1]
+    .venv/bin/python bench/edi.py [--work DIR] [--scenes blocks,chair,...] [--bins 2,4,8,16] [--threads 1] [--out DIR]
 
 Scenes are generated once into ``--work`` (default /tmp/eigs-bench-edi) with ``eigs synth``: the defaults (noisy
 sensor: σ = 0.03 mismatch, shot and leak noise, refractory period) and a clean variant (σ = 0, no noise, no
 refractory period, linear response). Ground-truth sharp frames at every latent time are rendered with the
 generator's own camera path and ray caster (checked against the scene's stored sharp frames at latent time 0).
-Writes the ``edi`` section of docs/benchmarks.md.
+Writes the ``edi`` section of docs/benchmarks.md (``--out DIR``: DIR/edi.md and DIR/edi.json instead).
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench._report import table, write_section  # noqa: E402
+from bench._report import add_out_argument, table, write_section  # noqa: E402
 
 SCENES = ["blocks", "chair", "tree", "dish", "spheres", "drums"]
 CLEAN = {"threshold_sigma": 0, "shot_noise_hz": 0, "leak_rate_hz": 0, "refractory_us": 0, "camera_response": "linear"}
@@ -79,6 +79,7 @@ def main() -> None:
     ap.add_argument("--bins", default="2,4,8,16")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--no-write", action="store_true", help="print only, leave docs/benchmarks.md alone")
+    add_out_argument(ap)
     args = ap.parse_args()
 
     import os
@@ -191,8 +192,17 @@ def main() -> None:
         ])
     )
     print(body)
+    data = {
+        "scenes": scenes,
+        "threads": args.threads,
+        "runtime_error": [{"bins": b, "mode": m, "time_s": t, "latent_psnr": p, "blurry_psnr": q}
+                          for b, m, t, p, q, _g in rt_rows],
+        "threshold_error_clean": [float(e) for e in thr_err_clean],
+        "threshold_error_noisy": [float(e) for e in thr_err_noisy],
+        "binning_events_per_s": float(np.median(binning_rates)),
+    }  # fmt: skip
     if not args.no_write:
-        write_section("edi", "EDI latent frames (bench/edi.py)", body)
+        write_section("edi", "EDI latent frames (bench/edi.py)", body, data=data, out=args.out)
 
 
 if __name__ == "__main__":

@@ -6,7 +6,7 @@ at mid-exposure). Reports registration, ATE (% of the extent), rotation error, l
 true intra-exposure motion, test-camera registration and reprojection error, and SfM time against the number of
 images V·(B+1). Writes the "sfm" section of docs/benchmarks.md.
 
-    .venv/bin/python bench/sfm.py [--work DIR] [--scenes blocks,chair] [--bins 4] [--no-write]
+    .venv/bin/python bench/sfm.py [--work DIR] [--scenes blocks,chair] [--bins 4] [--no-write] [--given] [--out DIR]
 """
 
 from __future__ import annotations
@@ -24,6 +24,8 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "src"))
 sys.path.insert(0, str(REPO))
+
+from bench._report import add_out_argument  # noqa: E402
 
 SCENES = ["blocks", "chair", "tree", "dish", "spheres", "drums"]
 EIGS = str(Path(sys.executable).parent / "eigs")
@@ -57,15 +59,17 @@ def blurry_edi(scene_h5: Path, out: Path) -> None:
         cv2.imwrite(str(out / "latent" / latent_png_name(i, 0)), cv2.cvtColor(b[i], cv2.COLOR_RGB2BGR))
 
 
-def run_sfm_cli(scene_h5: Path, edi_dir: Path, out: Path, reuse: bool) -> tuple[dict | None, float, str]:
-    """Run ``eigs sfm`` (or reuse an earlier report); returns (report or None, seconds, short error)."""
+def run_sfm_cli(
+    scene_h5: Path, edi_dir: Path, out: Path, reuse: bool, mode: str = "colmap"
+) -> tuple[dict | None, float, str]:
+    """Run ``eigs sfm --mode MODE`` (or reuse an earlier report); returns (report or None, seconds, short error)."""
     if reuse and (out / "report.json").exists():
         rep = json.loads((out / "report.json").read_text())
         return rep, float(rep.get("wall_s", sum(rep["timings_s"].values()))), ""
     t0 = time.perf_counter()
     p = subprocess.run(
         [EIGS, "sfm", str(scene_h5), str(edi_dir / "edi.h5"), "-o", str(out), "--latent-dir", str(edi_dir / "latent"),
-         "--mode", "colmap", "--min-registered-fraction", "0", "--threads", "2"],
+         "--mode", mode, "--min-registered-fraction", "0", "--threads", "2"],
         capture_output=True, text=True,
     )  # fmt: skip
     dt = time.perf_counter() - t0
@@ -104,9 +108,13 @@ def main() -> None:
     ap.add_argument("--reuse", action="store_true", help="reuse existing sfm/report.json files")
     ap.add_argument("--scaling-scene", default="blocks", help="scene of the time-vs-V·(B+1) sweep ('' to skip)")
     ap.add_argument("--scaling-bins", default="2,8", help="further B values of that sweep")
+    ap.add_argument("--given", action="store_true",
+                    help="also run `eigs sfm --mode given` (the scene's ground-truth poses, no COLMAP) per scene")
+    add_out_argument(ap)
     args = ap.parse_args()
     work = Path(args.work)
     rows, blur_rows, time_rows = [], [], []
+    given_rows, data = [], {"bins": args.bins, "latent": [], "blurry": [], "given": [], "scaling": []}
     for name in args.scenes.split(","):
         d = work / name
         d.mkdir(parents=True, exist_ok=True)
@@ -134,6 +142,14 @@ def main() -> None:
             ])  # fmt: skip
             tm = rep["timings_s"]
             time_rows.append([name, "latent", n_img, tm.get("features"), tm.get("matching"), tm.get("mapping"), dt])
+            data["latent"].append({"scene": name, "bins": args.bins, "images": n_img, "registered": reg["registered"],
+                                   "ate_percent": a.get("ate_percent_of_extent"), "time_s": dt})  # fmt: skip
+        if args.given:
+            grep_, gdt, gerr = run_sfm_cli(scene_h5, edi_dir, edi_dir / "sfm_given", args.reuse, mode="given")
+            ga = (grep_ or {}).get("accuracy", {})
+            given_rows.append([name, fmt(ga.get("ate_percent_of_extent")), f"{gdt:.1f}", gerr])
+            data["given"].append({"scene": name, "bins": args.bins, "ate_percent": ga.get("ate_percent_of_extent"),
+                                  "time_s": gdt, "error": gerr})  # fmt: skip
         bdir = d / "blurry"
         if not (bdir / "edi.h5").exists():
             blurry_edi(scene_h5, bdir)
@@ -149,6 +165,8 @@ def main() -> None:
             rot = "n/a" if few else fmt(ba.get("rotation_error_deg_median"))
             note = f"ATE needs ≥ {MIN_VIEWS_FOR_ATE} registered views" if few else ""
             blur_rows.append([name, reg_txt, ate, rot, note])
+            data["blurry"].append({"scene": name, "registered": breg["registered"], "images": breg["images"],
+                                   "ate_percent": None if few else ba.get("ate_percent_of_extent"), "time_s": bdt})
             tm = brep["timings_s"]
             time_rows.append([name, "blurry", breg["images"], tm.get("features"), tm.get("matching"),
                               tm.get("mapping"), bdt])  # fmt: skip
@@ -168,6 +186,9 @@ def main() -> None:
                 scaling_rows.append([args.scaling_scene, b, "–", "–", "–", "–", "–", "–", f"{dt:.0f}", err])
                 continue
             a, reg, tm = rep.get("accuracy", {}), rep["registration"], rep["timings_s"]
+            data["scaling"].append({"scene": args.scaling_scene, "bins": b, "images": reg["images"],
+                                    "registered": reg["registered"], "ate_percent": a.get("ate_percent_of_extent"),
+                                    "time_s": dt})  # fmt: skip
             scaling_rows.append([
                 args.scaling_scene, b, reg["images"], f"{reg['registered']}/{reg['images']}",
                 fmt(a.get("ate_percent_of_extent")), fmt(tm.get("features")), fmt(tm.get("matching")),
@@ -224,9 +245,15 @@ def main() -> None:
             + table(["scene", "B", "V·(B+1)", "registered", "ATE %", "features s", "matching s", "mapping s",
                      "total s", "note"], scaling_rows)  # fmt: skip
         )
+    if given_rows:
+        body += (
+            "\n\nThe same scenes in given mode (`eigs sfm --mode given`: the scene's ground-truth latent poses, "
+            "no COLMAP mapping; features matched along the known epipolar lines and triangulated):\n\n"
+            + table(["scene", "ATE %", "SfM s", "note"], given_rows)
+        )
     print(body)
     if not args.no_write:
-        write_section("sfm", "SfM (eigs sfm)", body)
+        write_section("sfm", "SfM (eigs sfm)", body, data=data, out=args.out)
 
 
 if __name__ == "__main__":
