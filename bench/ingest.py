@@ -1,11 +1,12 @@
 """Ingestion throughput (not CI): read rate of ``h5`` and ``txt`` event files on generated ≥ 20 M-event files.
 
-    .venv/bin/python bench/ingest.py [--events 20000000] [--keep]
+    .venv/bin/python bench/ingest.py [--events 20000000] [--keep] [--out DIR]
 
 Writes a DSEC-layout HDF5 file (uncompressed and Blosc-zstd) and an ECD text file to a temporary folder in /tmp,
 measures on one pinned core (a) the reader alone (``eigs.io`` chunk iterator: decode, unit conversion, checks) and
 (b) the whole ``eigs ingest`` into a scene file, with peak memory, then deletes the files and updates the
-``ingest`` section of docs/benchmarks.md.
+``ingest`` section of docs/benchmarks.md (only for ≥ 20 M events; ``--out DIR``: DIR/ingest.md and
+DIR/ingest.json, at any size).
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from bench._report import table, write_section  # noqa: E402
+from bench._report import add_out_argument, table, write_section  # noqa: E402
 
 W, H = 346, 260
 TARGET_H5 = 20e6  # events/s, one core
@@ -117,12 +118,13 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--events", type=int, default=20_000_000)
     ap.add_argument("--keep", action="store_true", help="keep the generated files (printed path)")
+    add_out_argument(ap)
     args = ap.parse_args()
     os.environ["EIGS_PROGRESS"] = "0"
     os.environ["BLOSC_NTHREADS"] = "1"
     os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
     tmp = Path(tempfile.mkdtemp(prefix="eigs-bench-ingest-", dir="/tmp"))
-    rows = []
+    rows, data = [], []
     try:
         ev = make_events(args.events)
         n = args.events
@@ -140,6 +142,8 @@ def main() -> None:
             rows.append(
                 [label, f"{n:,}", f"{size_mb:,.0f}", f"{n / secs / 1e6:.1f}", f"{n / wall / 1e6:.1f}", f"{peak:,.0f}"]
             )
+            data.append({"file": label, "events": n, "mb": size_mb, "reader_ev_per_s": n / secs,
+                         "ingest_ev_per_s": n / wall, "peak_rss_mb": peak})  # fmt: skip
             print(rows[-1], flush=True)
             if not args.keep:
                 path.unlink()
@@ -160,7 +164,9 @@ def main() -> None:
         + table(["file", "events", "MB", "reader M ev/s", "ingest M ev/s", "ingest peak RSS MB"], rows)
     )
     print(body)
-    if n >= 20_000_000:
+    if args.out is not None:
+        write_section("ingest", "Event ingestion throughput", body, data=data, out=args.out)
+    elif n >= 20_000_000:
         write_section("ingest", "Event ingestion throughput", body)
     else:
         print("(fewer than 20 M events: docs/benchmarks.md not updated)")

@@ -1,10 +1,13 @@
 """Time each image-quality metric per 512x512 pair on 2 threads; writes the "metrics" section of docs/benchmarks.md.
 
-Run: ``.venv/bin/python bench/metrics.py`` (needs ``eigs resources`` for LPIPS/BRISQUE; prepares them if absent).
+Run: ``.venv/bin/python bench/metrics.py [--quick] [--resources DIR] [--out DIR]`` (needs ``eigs resources`` for
+LPIPS/BRISQUE; prepares them if absent). ``--quick``: a fifth of the repeats (at least one).
 """
 
 from __future__ import annotations
 
+import argparse
+import os
 import statistics
 import sys
 import time
@@ -16,7 +19,7 @@ import torch
 from matplotlib import cbook
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from bench._report import table, write_section  # noqa: E402
+from bench._report import add_out_argument, table, write_section  # noqa: E402
 from eigs.metrics import resources  # noqa: E402
 from eigs.metrics.image import read_image  # noqa: E402
 from eigs.metrics.noreference import brisque  # noqa: E402
@@ -38,6 +41,13 @@ def timed(fn: Callable[[], object], repeats: int, clock: Callable[[], float] = t
 
 
 def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="a fifth of the repeats (at least one): a first look")
+    ap.add_argument("--resources", help="model files made by `eigs resources` (default: eigs' resources folder)")
+    add_out_argument(ap)
+    args = ap.parse_args()
+    if args.resources:
+        os.environ["EIGS_RESOURCES"] = args.resources
     torch.set_num_threads(THREADS)
     cv2.setNumThreads(THREADS)
     resources.prepare()
@@ -66,6 +76,7 @@ def main() -> None:
     load_before = Path("/proc/loadavg").read_text().split()[0]
     rows = []
     for name, how, fn, repeats in cases:
+        repeats = max(1, repeats // 5) if args.quick else repeats
         torch.set_num_threads(THREADS)
         cv2.setNumThreads(THREADS)
         wall = timed(fn, repeats)
@@ -84,7 +95,8 @@ def main() -> None:
         "multi-threaded element-wise ops most.\n\n" + table(headers, rows)
     )
     torch.set_num_threads(THREADS)  # the section's stamp reports torch's thread count
-    write_section("metrics", "Image-quality metrics", body)
+    data = [{"metric": n, "how": h, "wall_ms": w, "cpu_ms": c} for n, h, w, c in rows]
+    write_section("metrics", "Image-quality metrics", body, data=data, out=args.out)
 
 
 if __name__ == "__main__":

@@ -11,9 +11,13 @@ Measured per configuration (minimum over repeats; the machine is a shared VM who
   (``ThreadScaling``);
 - the compositing kernels alone, and their cost in ns per evaluated pair-lane per core, where the evaluated
   pair-lanes are sum over tiles of (Gaussians binned to the tile) x 256 = n_isects x 256;
-- the speed-up over the dense reference at 96^2 with 3k Gaussians, and the ISA variants.
+- the speed-up over the dense reference at 96^2 with 3k Gaussians, and the ISA variants;
+- the error of the float32 image against the dense reference in float64 (sizes small enough for the dense
+  reference's N x H x W temporaries).
 
-Usage: ``.venv/bin/python bench/rasterizer.py [--quick]`` (writes the "rasterizer" section of docs/benchmarks.md).
+Usage: ``.venv/bin/python bench/rasterizer.py [--quick] [--out DIR]`` (writes the "rasterizer" section of
+docs/benchmarks.md; ``--quick``: two sizes, short budgets, no report unless ``--out DIR`` is given, which writes
+DIR/rasterizer.md and DIR/rasterizer.json instead).
 """
 
 from __future__ import annotations
@@ -28,7 +32,7 @@ from pathlib import Path
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _report import table, write_section  # noqa: E402
+from _report import add_out_argument, table, write_section  # noqa: E402
 
 from eigs.render import _backend, rasterize  # noqa: E402
 from eigs.render._wrapper import camera_list, rasterize_cpu  # noqa: E402
@@ -152,9 +156,25 @@ def time_kernels(args: tuple, repeats: int, isa: int = 0) -> tuple[float, float,
     return best_f, best_b, int(ids.numel()), cpu_f, cpu_b
 
 
+ERROR_CONFIGS = [(32, 250), (64, 1_000), (64, 4_000)]  # (image size, N): dense float64 reference affordable
+
+
+def reference_error(size: int, n: int) -> tuple[float, float]:
+    """(max, RMS) absolute error of the float32 image of :func:`rasterize` against :func:`render_reference` in
+    float64 on the benchmark scene of ``n`` Gaussians at ``size``² (values in [0, 1])."""
+    args = make_scene(n, size)
+    f64 = tuple(a.double() if torch.is_tensor(a) and a.is_floating_point() else a for a in args)
+    with torch.no_grad():
+        ours = rasterize(*args)[0].double()
+        ref = render_reference(*f64)[0]
+    err = (ours - ref).abs()
+    return float(err.max()), float(err.square().mean().sqrt())
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="fewer sizes and repeats (smoke run; no report)")
+    ap.add_argument("--quick", action="store_true", help="fewer sizes and repeats (smoke run; no report without --out)")
+    add_out_argument(ap)
     opts = ap.parse_args()
     _backend.load()
     isas = _backend.available_isas()
@@ -215,8 +235,13 @@ def main() -> None:
     ref_f, ref_b = time_pipeline(render_reference, args, 1 if opts.quick else 2)
     speedup = (ref_f + ref_b) / (ours_f + ours_b)
     print("reference", ref_f, ref_b, "ours", ours_f, ours_b, "speed-up", speedup, flush=True)
-    if opts.quick:
+    if opts.quick and opts.out is None:
         return
+    err_rows = []
+    for size, n in ERROR_CONFIGS[:2] if opts.quick else ERROR_CONFIGS:
+        emax, erms = reference_error(size, n)
+        err_rows.append([f"{size}²", n, f"{emax:.2e}", f"{erms:.2e}"])
+        print("error", size, n, emax, erms, flush=True)
 
     worst_ns = max(per_core_ns)
     min_scale = min(s for _, _, s in scalings)
@@ -241,9 +266,9 @@ run. Kernel ISA: best available ({isas[-1]}).
 **Whole pipeline** through `eigs.render.rasterize` (forward = projection + binning + compositing; backward =
 `torch.autograd.backward` of image and alpha with random cotangents). 1- and 2-thread calls interleave round
 by round, each timed call preceded by an untimed one (threads awake, caches warm, as in a training loop), for
-25 s per configuration in all, split into {passes} passes over all configurations spread over the run; the
-times are the minima over the rounds, "2T scaling" is the ratio of the minima and "median of rounds" the median
-of the per-round ratios:
+{2 if opts.quick else 25} s per configuration in all, split into {passes} passes over all configurations spread over
+the run; the times are the minima over the rounds, "2T scaling" is the ratio of the minima and "median of
+rounds" the median of the per-round ratios:
 
 {table(["image", "N", "n_isects", "isects/tile", "fwd 1T", "bwd 1T", "fwd 2T", "bwd 2T", "rounds", "2T scaling",
         "median of rounds"], rows)}
@@ -264,6 +289,11 @@ SSE2 fallback, in which GCC leaves the forward lane loop scalar):
 reference {1e3 * (ref_f + ref_b):.0f} ms ({1e3 * ref_f:.0f} + {1e3 * ref_b:.0f}), ours
 {1e3 * (ours_f + ours_b):.2f} ms ({1e3 * ours_f:.2f} + {1e3 * ours_b:.2f}): **{speedup:.0f}×**.
 
+**Error against the dense reference in float64** (the float32 image of `rasterize`, same scenes, values in
+[0, 1]; the reference's N × H × W temporaries limit it to small images):
+
+{table(["image", "N", "max abs error", "RMS error"], err_rows)}
+
 **Targets** (issue 8):
 - forward + backward ≤ 10 ns per pair-lane per core: worst configuration {worst_ns:.2f} ns (1 thread) —
   {"met" if worst_ns <= 10 else "NOT met"}.
@@ -271,7 +301,16 @@ reference {1e3 * (ref_f + ref_b):.0f} ms ({1e3 * ref_f:.0f} + {1e3 * ref_b:.0f})
 - 2-thread scaling ≥ 1.7×: {min_scale:.2f}× worst over all sizes —
   {"met at every size" if not below else "NOT met at " + ", ".join(below)}.{scaling_note}
 """
-    write_section("rasterizer", "Rasterizer (CPU, issue 8)", body)
+    data = {
+        "quick": opts.quick,
+        "pipeline": [{"size": s, "n": n, "n_isects": r[2], "fwd_1t_ms": r[4], "bwd_1t_ms": r[5], "fwd_2t_ms": r[6],
+                      "bwd_2t_ms": r[7], "scaling": sc} for (s, n, sc), r in zip(scalings, rows, strict=True)],
+        "error": [{"size": s, "n": n, "max_abs": float(r[2]), "rms": float(r[3])}
+                  for (s, n), r in zip(ERROR_CONFIGS, err_rows, strict=False)],
+        "speedup_96_3k": speedup,
+        "worst_ns_per_pair_lane": worst_ns,
+    }  # fmt: skip
+    write_section("rasterizer", "Rasterizer (CPU, issue 8)", body, data=data, out=opts.out)
 
 
 if __name__ == "__main__":

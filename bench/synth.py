@@ -1,7 +1,8 @@
 """Generate the six default synthetic scenes; report time per scene, blur extent and event counts.
 
 Writes the "synth" section of docs/benchmarks.md. Run: ``.venv/bin/python bench/synth.py [--threads 2]
-[--out DIR] [scene ...]`` (scene files go to a temporary directory unless ``--out`` is given).
+[--keep DIR] [--out DIR] [scene ...]`` (scene files go to a temporary directory unless ``--keep`` is given;
+``--out DIR``: DIR/synth.md and DIR/synth.json instead of docs/benchmarks.md).
 
 Blur extent: every scene point seen at a pixel centre at the start of an exposure is projected at 17 times along
 the true trajectory of that exposure; its extent is the diameter of those projections (px). The table gives the
@@ -18,7 +19,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from bench._report import table, write_section  # noqa: E402
+from bench._report import add_out_argument, table, write_section  # noqa: E402
 
 DEFAULT_SCENES = ["blocks", "chair", "tree", "dish", "spheres", "drums"]
 
@@ -27,7 +28,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("scenes", nargs="*", default=DEFAULT_SCENES)
     ap.add_argument("--threads", type=int, default=2)
-    ap.add_argument("--out", help="keep the scene files and contact sheets in this directory")
+    ap.add_argument("--keep", help="keep the scene files and contact sheets in this directory")
+    add_out_argument(ap)
     args = ap.parse_args()
     os.environ.setdefault("EIGS_PROGRESS", "0")
     from eigs.synth.generate import generate, write_generated
@@ -38,7 +40,7 @@ def main() -> None:
     total = 0.0
     load0 = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as tmp:
-        out = Path(args.out or tmp)
+        out = Path(args.keep or tmp)
         out.mkdir(parents=True, exist_ok=True)
         for name in args.scenes:
             t0 = time.perf_counter()
@@ -70,7 +72,9 @@ def main() -> None:
         + f"\n\nAll {len(rows)} scenes: {total:.0f} s (1-min load average {load0:.1f} at the start, "
         f"{os.getloadavg()[0]:.1f} at the end, on {os.cpu_count()} cores: the machine is shared)."
     )
-    write_section("synth", "Synthetic scenes (eigs synth)", body)
+    keys = ["scene", "total_s", "render_s", "events_s", "frames", "blur_median_px", "blur_p90_px"]
+    data = [dict(zip(keys, r[: len(keys)], strict=True)) for r in rows]
+    write_section("synth", "Synthetic scenes (eigs synth)", body, data=data, out=args.out)
 
 
 if __name__ == "__main__":

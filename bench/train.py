@@ -3,7 +3,9 @@
 Writes the "train-step" section of docs/benchmarks.md. Needs a built-in scene's artifacts (default
 ``results/chair``: run ``snakemake --cores 2 all_sfm`` first, or pass ``--results DIR``).
 
-Run: ``.venv/bin/python bench/train.py [--results results/chair] [--threads 2]``
+Run: ``.venv/bin/python bench/train.py [--results results/chair] [--bins 4] [--threads 2] [--quick] [--out DIR]``
+(``--quick``: 5k and 10k Gaussians, half and full image size, 8 repeats; ``--out DIR``: DIR/train-step.md,
+DIR/train-step-methods.md and their JSON instead of docs/benchmarks.md).
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ from pathlib import Path
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from bench._report import table, write_section  # noqa: E402
+from bench._report import add_out_argument, table, write_section  # noqa: E402
 from eigs.artifacts.gaussians import GaussianCloud  # noqa: E402
 from eigs.losses import photometric_loss  # noqa: E402
 from eigs.train.config import TrainConfig  # noqa: E402
@@ -137,7 +139,7 @@ def size_sections(args: argparse.Namespace, r: Path, data, base: GaussianCloud) 
     """The 3dgs step broken down by Gaussian count and by image size."""
     cfg = TrainConfig.from_dict({"method": "3dgs", "densify": False})
     rows = []
-    for n in (5_000, 10_000, 20_000, 40_000):
+    for n in (5_000, 10_000) if args.quick else (5_000, 10_000, 20_000, 40_000):
         data.init = resized_cloud(base, n)
         tr = Trainer(data, cfg, torch.device("cpu"))
         tr.warm_up()
@@ -147,7 +149,7 @@ def size_sections(args: argparse.Namespace, r: Path, data, base: GaussianCloud) 
     data.init = resized_cloud(base, 10_000)
     w0, h0, k0 = data.width, data.height, data.K.clone()
     size_rows = []
-    for f in (0.5, 1.0, 2.0):
+    for f in (0.5, 1.0) if args.quick else (0.5, 1.0, 2.0):
         data.width, data.height = int(w0 * f), int(h0 * f)
         data.K = k0.clone()
         data.K[:2] *= f
@@ -167,7 +169,10 @@ def size_sections(args: argparse.Namespace, r: Path, data, base: GaussianCloud) 
         "By Gaussian count (init cloud resampled):\n\n" + table(cols, rows) + "\n\nBy image size (10k Gaussians):\n\n"
         + table(cols, size_rows) + "\n"
     )
-    write_section("train-step", "Training step", md)
+    keys = ["gaussians", "image", "render_fwd_ms", "loss_ms", "render_bwd_ms", "adam_ms", "densify_ms", "step_ms"]
+    data = {"by_count": [dict(zip(keys, r, strict=True)) for r in rows],
+            "by_size": [dict(zip(keys, r, strict=True)) for r in size_rows]}  # fmt: skip
+    write_section("train-step", "Training step", md, data=data, out=args.out)
     print(md)
 
 
@@ -176,11 +181,17 @@ def main() -> None:
     ap.add_argument("--results", default="results/chair", help="a scene's results folder (scene.h5, b4/…)")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--repeats", type=int, default=40)
+    ap.add_argument("--bins", type=int, default=4, help="the EDI artifact results/<scene>/b<B>/ to train on")
     ap.add_argument("--methods-only", action="store_true", help="only the per-method section")
+    ap.add_argument("--quick", action="store_true", help="fewer Gaussian counts and sizes (see the module doc)")
+    add_out_argument(ap)
     args = ap.parse_args()
+    if args.quick:
+        args.repeats = min(args.repeats, 8)
     torch.set_num_threads(args.threads)
     r = Path(args.results)
-    data = load_train_data(r / "scene.h5", r / "b4" / "edi.h5", r / "b4" / "sfm", r / "b4" / "init.ply")
+    b = r / f"b{args.bins}"
+    data = load_train_data(r / "scene.h5", b / "edi.h5", b / "sfm", b / "init.ply")
     base = data.init
     w0, h0, k0 = data.width, data.height, data.K.clone()
     if not args.methods_only:
@@ -210,7 +221,10 @@ def main() -> None:
         "the ADE network alone on all Gaussians; `÷ 3dgs`: whole step over the `3dgs` step of the same run.\n\n"
         + table(mcols, mrows) + "\n"
     )
-    write_section("train-step-methods", "Training step of every method", mmd)
+    mkeys = ["method", "renders", "renders_fwd_ms", "other_fwd_ms", "backward_ms", "adam_ms", "step_ms", "ade_ms",
+             "ratio_3dgs"]  # fmt: skip
+    mdata = {"scene": r.name, "threads": args.threads, "methods": [dict(zip(mkeys, x, strict=True)) for x in mrows]}
+    write_section("train-step-methods", "Training step of every method", mmd, data=mdata, out=args.out)
     print(mmd)
 
 
