@@ -41,8 +41,10 @@ test: venv lint
 test-cluster: venv
 	$(BIN)/pytest -p no:xdist -m cluster tests/cluster
 
+# The benchmarks as a workflow target (rules/bench.smk): regenerates docs/benchmarks.md; QUICK=1 for a first look in
+# minutes (few scenes, sizes and repeats; writes results/bench/benchmarks.md instead).
 bench: venv
-	for b in bench/[a-z]*.py; do $(BIN)/python $$b || exit 1; done
+	$(BIN)/snakemake bench --cores $(CORES) --configfile=$(CONFIG) $(if $(QUICK),--config bench_quick=1)
 
 clean-results:
 	rm -rf results logs benchmarks .snakemake
