@@ -286,13 +286,21 @@ def skips(d: Path, facts: dict, fig: Path) -> str:
         "none (the same files)",
         "edi.json, sfm.json, config",
     )
-    cells, distinct = facts.get("table_cells", 0), facts.get("table_runs", 0)
-    eigs_train = None if "eigs" not in steps else steps["eigs"] / 1e3 * n_steps * (cells - distinct)
+    runs = facts.get("table_runs", {})
+    cells = sum(r["rows"] for r in runs.values())
+    twice = {name: r for name, r in runs.items() if r["rows"] > 1}
+    missing = [r["method"] for r in twice.values() if r["method"] not in steps]
+    retrain = (
+        None
+        if missing or not twice
+        else sum((r["rows"] - 1) * steps[r["method"]] / 1e3 * (r["steps"] or n_steps) for r in twice.values())
+    )
+    shared = ", ".join(f"`{name}` in {r['rows']}" for name, r in twice.items()) or "none shared"
     add(
         "a run in several tables trains once",
-        f"{cells} table rows name {distinct} runs: {cells - distinct} trainings fewer per scene",
-        eigs_train,
-        f" per scene (`eigs` steps × {n_steps})",
+        f"{cells} table rows name {len(runs)} runs: {cells - len(runs)} trainings fewer per scene ({shared})",
+        retrain,
+        " per scene (step time × the run's steps)",
         "none (one run folder)",
         "train-step-methods.json, eigs.tables.rows",
     )

@@ -28,13 +28,14 @@ def bench_train_scene():
 
 
 def bench_facts():
-    """Job counts of this config for the skips table (bench/report.py): training and upstream jobs, table rows
-    naming a configured run and the distinct runs they name, scenes whose SfM uses given poses."""
+    """Job counts of this config for the skips table (bench/report.py): training and upstream jobs, scenes whose SfM
+    uses given poses, and per run named by a table row: its method, the number of rows naming it and its `steps`
+    option (null: the TrainConfig default)."""
     named = [run for rows in TABLE_ROWS.values() for run in rows.values() if run in RUNS]
     return config_json({
         "train_jobs": sum(len(run_scenes(r)) for r in RUNS),
         "upstream_jobs": len(ALL_SCENES) * len(edi_bins()),
-        "table_cells": len(named),
-        "table_runs": len(set(named)),
         "sfm_given": len(SFM_GIVEN_SCENES),
+        "table_runs": {r: {"method": RUNS[r]["method"], "rows": named.count(r),
+                           "steps": RUNS[r].get("options", {}).get("steps")} for r in sorted(set(named))},
     })  # fmt: skip
