@@ -1,10 +1,9 @@
 # Benchmarks: `snakemake --cores N bench` (not part of `all`; helpers in rules/common_bench.smk). Each script in
 # bench/ runs as a job writing its section (NAME.md) and measurements (NAME.json) to results/bench/; bench_report
-# assembles them with figures into docs/benchmarks.md, or, in quick mode (config `bench_quick: true`), into
-# results/bench/benchmarks.md, leaving docs/benchmarks.md alone. Every bench job asks for all the cores Snakemake
-# has (threads: workflow.cores), so no two timings overlap; the scripts set their own thread counts (their sections
-# say which). The jobs call the scripts of this checkout's bench/ folder (python, not the eigs CLI): they run here,
-# not on a cluster.
+# assembles them with figures into docs/benchmarks.md, or, in quick mode (`--config bench_quick=1`), into
+# results/bench/benchmarks.md, leaving docs/benchmarks.md alone. Every bench job asks for 2 threads (BENCH_THREADS),
+# so with --cores 2 no two timings overlap; the scripts set their own thread counts (their sections say which). The
+# jobs call the scripts of this checkout's bench/ folder (python, not the eigs CLI): they run here, not on a cluster.
 
 
 rule bench_script:
@@ -21,7 +20,7 @@ rule bench_script:
         "logs/bench/{name}.log",
     benchmark:
         "benchmarks/bench/{name}.tsv"
-    threads: workflow.cores
+    threads: BENCH_THREADS
     resources:
         mem_mb=8000,
     conda:
@@ -45,7 +44,7 @@ rule bench_metrics:
         "logs/bench/metrics.log",
     benchmark:
         "benchmarks/bench/metrics.tsv"
-    threads: workflow.cores
+    threads: BENCH_THREADS
     resources:
         mem_mb=8000,
     conda:
@@ -73,7 +72,7 @@ rule bench_train:
         "logs/bench/train.log",
     benchmark:
         "benchmarks/bench/train.tsv"
-    threads: workflow.cores
+    threads: BENCH_THREADS
     resources:
         mem_mb=8000,
     conda:

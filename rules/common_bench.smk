@@ -1,6 +1,9 @@
 # Helpers of rules/bench.smk (the `bench` target); needs rules/common.smk and rules/common_tables.smk.
 BENCH_DIR = os.path.normpath(os.path.join(workflow.basedir, "..", "bench"))
 BENCH_QUICK = bool(config["bench_quick"])  # default: the schema
+# Threads of every bench job: the machine's 2 cores of the measured sections, so that with `--cores 2` (make bench)
+# no two timings overlap (workflow.cores would need --cores, which cluster runs do not set).
+BENCH_THREADS = 2
 # Arguments of each bench/<name>.py: (full, quick). Quick: few scenes, sizes and repeats, minutes in all.
 BENCH_ARGS = {
     "metrics": ("", "--quick"),
