@@ -101,6 +101,7 @@ def main() -> None:
     thr_rows = []
     thr_err_clean, thr_err_noisy = [], []
     gains_b4 = []
+    sizes: set[str] = set()
     binning_rates, latent_rates_est, latent_rates_e2 = [], [], []
     for name in scenes:
         noisy_p = ensure_scene(work, name, False, args.threads)
@@ -109,6 +110,7 @@ def main() -> None:
         c_true = float(scene.contrast_threshold or 0.2)
         exp = scene.frames.exposure_us
         v_n, h, w = scene.frames.blurry.shape[:3]
+        sizes.add(f"{w}×{h}, {v_n} views")
         # ground truth check at latent time 0
         gt0 = sharp_at(name, None, latent_times(exp, 4)[:2, 0], args.threads)
         idx0 = [int(np.flatnonzero((scene.sharp.kind == 0) & (scene.sharp.view == v))[0]) for v in range(2)]
@@ -169,7 +171,7 @@ def main() -> None:
         rt_rows.append([bins, mode, round(float(arr[:, 0].mean()), 2), round(float(arr[:, 1].mean()), 2),
                         round(float(arr[:, 2].mean()), 2), f"{float((arr[:, 1] - arr[:, 2]).mean()):+.2f}"])
     body = (
-        f"Scenes: {', '.join(scenes)} (128×96, 24 views, noisy sensor defaults unless stated), "
+        f"Scenes: {', '.join(scenes)} ({'; '.join(sorted(sizes))}, noisy sensor defaults unless stated), "
         f"{args.threads} thread(s). PSNR of the latent frames against ground-truth sharp frames rendered at the same "
         "latent times (all views, all k), and of the blurry frame against the same frames. Run time is the whole "
         "`compute_edi` call per scene (binning, mask, threshold search, latent frames), without file I/O.\n\n"
