@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import re
 import subprocess
 import sys
@@ -230,7 +231,8 @@ def main() -> None:
         )  # fmt: skip
         + "\n\nCOLMAP on the blurry frames alone (one image per view, scored at mid-exposure):\n\n"
         + table(["scene", "views registered", "ATE %", "rot. err. °", "note"], blur_rows)
-        + "\n\nSfM time against the number of images V·(B+1) (2 threads; shared machine):\n\n"
+        + "\n\nSfM time against the number of images V·(B+1) (2 threads; 1-minute load average "
+        f"{os.getloadavg()[0]:.1f} when written, the SfM itself included):\n\n"
         + table(
             ["scene", "images", "V·(B+1)", "features s", "matching s", "mapping s", "total s"],
             [[r[0], r[1], r[2], fmt(r[3]), fmt(r[4]), fmt(r[5]), fmt(r[6])] for r in time_rows],
