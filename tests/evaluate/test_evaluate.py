@@ -46,6 +46,8 @@ def test_layout_and_run_facts(synthetic):
     assert doc["n_gaussians"] == 300 and doc["train_seconds"] == 12.5 and doc["steps"] == 10
     assert doc["fps"] > 0 and doc["frames_timed"] == 4 and doc["test_cameras"]["given"] == 4
     assert doc["bins"] == 4 and doc["run"] == "run"
+    # a scene with ground truth is scored by the reference metrics only: no BRISQUE (issue 20's skips)
+    assert set(doc["metrics"]) == {"blur", "novel"} and not any("brisque" in g for g in doc["metrics"].values())
     # the ground truth saved beside the renders is the scene's, bit for bit
     from eigs.scene import read_scene
 
