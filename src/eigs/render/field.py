@@ -4,7 +4,9 @@ the alpha-compositing quadrature of :func:`eigs.render.volume.composite`.
 
 The field (``FieldTensors``) is the model file's content as tensors (:mod:`eigs.artifacts.field` documents the
 layout): ``grid`` (1, 1 + C, Z, Y, X) raw values, density σ = softplus(raw + ``density_shift``) per world unit,
-colour sigmoid(raw colour); ``lo``, ``hi`` (3,) the box; ``occupancy`` (Z, Y, X) bool.
+colour sigmoid(raw colour); ``lo``, ``hi`` (3,) the box; ``occupancy`` (Z, Y, X) bool; ``warp`` (2, 3, K) the
+per-axis piecewise-linear map from world coordinates to the grid's normalised coordinates (a finer core, coarser
+shells; ``None``: linear over the box).
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ import torch.nn.functional as F
 from torch import Tensor
 
 from eigs.artifacts.field import FieldArrays
-from eigs.render.volume import TAU_MAX, composite, ray_aabb
+from eigs.render.volume import TAU_MAX, composite, distortion, ray_aabb
 
 TRANS_MIN = 1e-4  # samples behind a transmittance this low are not composited
 
@@ -34,6 +36,7 @@ class FieldTensors:
     density_shift: float
     n_samples: int
     near: float
+    warp: np.ndarray | None = None  # (2, 3, K) knots: world (warp[0]) and normalised in [0, 1] (warp[1]) per axis
 
     @classmethod
     def from_arrays(cls, f: FieldArrays, device: torch.device) -> FieldTensors:
@@ -45,6 +48,7 @@ class FieldTensors:
             density_shift=float(f.density_shift),
             n_samples=int(f.n_samples),
             near=float(f.near),
+            warp=None if f.warp is None else np.asarray(f.warp, np.float64),
         )
 
     @property
@@ -79,11 +83,33 @@ def image_rays(c2w: Tensor, K: Tensor, width: int, height: int) -> tuple[Tensor,
     return pixel_rays(c2w.to(dev), K, xs.reshape(-1) + 0.5, ys.reshape(-1) + 0.5)
 
 
+def warp_coords(field: FieldTensors, pts: Tensor) -> Tensor:
+    """Normalised grid coordinates in [0, 1] (…, 3) of world points ``pts`` (…, 3): per axis the piecewise-linear
+    map through the knots ``field.warp`` (linear over the box when there is none), constant outside the box."""
+    if field.warp is None:
+        return ((pts - field.lo) / (field.hi - field.lo)).clamp(0.0, 1.0)
+    xs, us = field.warp[0].tolist(), field.warp[1].tolist()
+    out = []
+    for a in range(3):
+        x, u = pts[..., a], None
+        for k in range(len(xs[a]) - 1):
+            slope = (us[a][k + 1] - us[a][k]) / (xs[a][k + 1] - xs[a][k])
+            term = slope * (x.clamp(xs[a][k], xs[a][k + 1]) - xs[a][k])
+            u = term + us[a][0] if u is None else u + term
+        out.append(u)
+    return torch.stack(out, dim=-1)
+
+
 def query(field: FieldTensors, pts: Tensor, density_only: bool = False) -> Tensor:
     """Raw grid values (N, 1 + C) (or (N, 1): the density only) at world points ``pts`` (N, 3) by trilinear
-    interpolation (border-clamped)."""
+    interpolation in the warped coordinates (border-clamped)."""
+    return query_warped(field, warp_coords(field, pts), density_only)
+
+
+def query_warped(field: FieldTensors, u: Tensor, density_only: bool = False) -> Tensor:
+    """:func:`query` at normalised grid coordinates ``u`` (N, 3) in [0, 1] (:func:`warp_coords` of the points)."""
     grid = field.grid[:, :1] if density_only else field.grid
-    u = (pts - field.lo) / (field.hi - field.lo) * 2.0 - 1.0
+    u = u * 2.0 - 1.0
     out = F.grid_sample(grid, u.reshape(1, 1, 1, -1, 3), mode="bilinear", padding_mode="border", align_corners=True)
     return out.reshape(grid.shape[1], -1).T
 
@@ -92,17 +118,25 @@ def occupied(field: FieldTensors, pts: Tensor) -> Tensor:
     """Whether the voxel corner nearest each point (…, 3) is occupied (…,) bool."""
     occ = field.occupancy
     dims = torch.tensor([occ.shape[2], occ.shape[1], occ.shape[0]], device=pts.device, dtype=pts.dtype)
-    idx = torch.round((pts - field.lo) / (field.hi - field.lo) * (dims - 1))
+    idx = torch.round(warp_coords(field, pts) * (dims - 1))
     idx = torch.minimum(idx.clamp_min(0), dims - 1).long()
     return occ[idx[..., 2], idx[..., 1], idx[..., 0]]
 
 
-def _occupied_along(field: FieldTensors, origins: Tensor, dirs: Tensor, t: Tensor) -> tuple[Tensor, Tensor]:
-    """:func:`occupied` at the points origins + t · dirs ((R, 3), (R, 3), (R, S) → (R, S)), without forming them,
-    and the flat index of each point's nearest voxel corner (R, S)."""
+def _occupied_along(
+    field: FieldTensors, origins: Tensor, dirs: Tensor, t: Tensor
+) -> tuple[Tensor, Tensor, Tensor | None]:
+    """:func:`occupied` at the points origins + t · dirs ((R, 3), (R, 3), (R, S) → (R, S)), the flat index of each
+    point's nearest voxel corner (R, S), and with a warp the points' normalised coordinates (R, S, 3) (without
+    one, the points are never formed: None)."""
     occ = field.occupancy
     z, y, x = occ.shape
     dims = torch.tensor([x, y, z], device=t.device, dtype=t.dtype)
+    if field.warp is not None:
+        u = warp_coords(field, origins.unsqueeze(1) + t.unsqueeze(-1) * dirs.unsqueeze(1))
+        i = torch.minimum(torch.round(u * (dims - 1)), dims - 1).long()
+        flat = (i[..., 2] * y + i[..., 1]) * x + i[..., 0]
+        return occ.reshape(-1)[flat], flat, u
     scale = (dims - 1) / (field.hi - field.lo)
     a = (origins - field.lo) * scale  # (R, 3) grid coordinates of the origin
     b = dirs * scale
@@ -110,7 +144,7 @@ def _occupied_along(field: FieldTensors, origins: Tensor, dirs: Tensor, t: Tenso
     for axis, stride in ((0, 1), (1, x), (2, x * y)):
         i = torch.round(a[:, axis : axis + 1] + t * b[:, axis : axis + 1]).clamp(0, float(dims[axis] - 1))
         flat += i.long() * stride
-    return occ.reshape(-1)[flat], flat
+    return occ.reshape(-1)[flat], flat, None
 
 
 def render_rays(
@@ -132,24 +166,31 @@ def render_rays(
     ``TRANS_MIN`` × the largest colour difference). A ray that misses the box sees the background.
 
     ``stats``: when given, filled with ``voxels`` (N,) the flat index (into ``occupancy``) of the voxel nearest each
-    composited sample and ``weights`` (N,) its compositing weight T·α (detached), for the occupancy update."""
+    composited sample and ``weights`` (N,) its compositing weight T·α (detached), for the occupancy update, and
+    ``distortion`` (R,) each ray's distortion (:func:`eigs.render.volume.distortion`, differentiable) with sample
+    positions in fractions of the ray's stretch inside the box."""
     s = field.n_samples
     t_near, t_far = ray_aabb(origins, dirs, field.lo, field.hi, field.near)
     length = (t_far - t_near).unsqueeze(-1)  # (R, 1), 0 for rays that miss the box
     steps = torch.arange(s, device=origins.device, dtype=origins.dtype)
     frac = (steps + (0.5 if jitter is None else jitter)) / s
     t = t_near.unsqueeze(-1) + frac * length  # (R, S)
-    keep, flat = _occupied_along(field, origins, dirs, t)
+    keep, flat, u = _occupied_along(field, origins, dirs, t)
     keep &= length > 0
     n_rays, c = keep.shape[0], field.channels
     delta = length / s  # (R, 1)
     rows, cols = keep.nonzero(as_tuple=True)  # row-major: front to back within each ray
+
+    def at(r: Tensor, k: Tensor, density_only: bool = False) -> Tensor:
+        if u is not None:
+            return query_warped(field, u[r, k], density_only)
+        return query(field, origins[r] + t[r, k, None] * dirs[r], density_only)
+
     if rows.numel():  # drop the samples behind opaque ones (density-only pass, no gradient)
         with torch.no_grad():
             slot = (torch.cumsum(keep, dim=1) - 1)[rows, cols]
-            pts = origins[rows] + t[rows, cols, None] * dirs[rows]
             width = int(slot.max()) + 1
-            sig = F.softplus(query(field, pts, density_only=True)[:, 0] + field.density_shift)
+            sig = F.softplus(at(rows, cols, density_only=True)[:, 0] + field.density_shift)
             tau = (sig * delta[rows, 0]).clamp(0.0, TAU_MAX)
             packed = torch.zeros((n_rays, width), dtype=tau.dtype, device=tau.device).index_put((rows, slot), tau)
             excl = torch.cumsum(packed, dim=1) - packed
@@ -158,7 +199,7 @@ def render_rays(
     else:
         slot = rows
     width = int(slot.max()) + 1 if slot.numel() else 1
-    raw = query(field, origins[rows] + t[rows, cols, None] * dirs[rows])  # (N, 1 + C)
+    raw = at(rows, cols)  # (N, 1 + C)
     sig = F.softplus(raw[:, 0] + field.density_shift)
     col = torch.sigmoid(raw[:, 1:])
     sigmas = raw.new_zeros((n_rays, width)).index_put((rows, slot), sig)
@@ -168,6 +209,8 @@ def render_rays(
     if stats is not None:
         stats["voxels"] = flat[rows, cols]
         stats["weights"] = weights.detach()[rows, slot]
+        pos = raw.new_zeros((n_rays, width)).index_put((rows, slot), frac.expand_as(t)[rows, cols].to(raw.dtype))
+        stats["distortion"] = distortion(weights, pos, torch.full_like(pos, 1.0 / s))
     return rgb, acc
 
 

@@ -6,8 +6,8 @@ Run folder: ``model.npz`` (:mod:`eigs.artifacts.field`), ``config.json`` (the sa
 ``n_gaussians``). Checkpoints in the sibling ``RUN_DIR.partial/``; a killed run resumes to the same parameters.
 
 One step: grow the grid when the schedule says so (a new Adam for the grid), refresh the occupancy mask, set the
-decayed learning rate, draw and render the method's rays, MSE (+ the method's terms, + total variation), skip the
-step when the loss or a gradient is not finite, Adam.
+decayed learning rate, draw and render the method's rays, MSE (+ the method's terms), skip the step when the loss
+or a gradient is not finite, add the gradient of the total variation in place, Adam.
 """
 
 from __future__ import annotations
@@ -156,10 +156,10 @@ class FieldTrainer:
             group["lr"] = lr_at(o, step, self.cfg.steps)
         out = self.method.step(self.model, step, self.gen)
         loss, terms = out.loss, dict(out.terms)
-        if o.tv_density > 0 or o.tv_colour > 0:
-            tv_d, tv_c = self.model.total_variation()
-            loss = loss + o.tv_density * tv_d + o.tv_colour * tv_c
-            terms["tv"] = float(tv_d.item() + tv_c.item())
+        dist = self.method.take_distortion()
+        if o.distortion > 0 and dist is not None:
+            loss = loss + o.distortion * dist
+            terms["distortion"] = dist.item()
         self.grid_opt.zero_grad(set_to_none=True)
         if self.method_opt is not None:
             self.method_opt.zero_grad(set_to_none=True)
@@ -168,6 +168,11 @@ class FieldTrainer:
             loss.backward()
             grads = [p.grad for p in [self.model.grid, *self.method.parameters()] if p.grad is not None]
             ok = all(bool(torch.isfinite(g).all()) for g in grads)
+        if ok and (o.tv_density > 0 or o.tv_colour > 0):  # total variation: its gradient added in place
+            if self.model.grid.grad is None:
+                self.model.grid.grad = torch.zeros_like(self.model.grid)
+            terms["tv"] = self.model.add_total_variation_grad(o.tv_density, o.tv_colour)
+            loss = loss.detach() + terms["tv"]
         self.step += 1
         if not ok:
             self.bad += 1

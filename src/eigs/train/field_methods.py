@@ -67,8 +67,9 @@ def _check_field_options(o: FieldOptions, where: str) -> None:
         (all(0 < f <= 1 for f in o.grow_at) and list(o.grow_at) == sorted(o.grow_at), "grow_at: increasing in (0, 1]"),
         (0 < o.alpha_init < 1 and 0 < o.occupancy_weight < 1, "alpha_init and occupancy_weight must lie in (0, 1)"),
         (o.lr_grid >= 0 and 0 < o.lr_decay <= 1, "lr_grid must be >= 0 and lr_decay in (0, 1]"),
-        (o.tv_density >= 0 and o.tv_colour >= 0 and o.near >= 0, "tv weights and near must be >= 0"),
+        (min(o.tv_density, o.tv_colour, o.distortion, o.near) >= 0, "tv weights, distortion and near must be >= 0"),
         (o.occupancy_every >= 1 and o.occupancy_start >= 0, "occupancy_every >= 1, occupancy_start >= 0"),
+        (o.core_ratio >= 1 and o.core_radius > 0, "core_ratio must be >= 1 and core_radius > 0"),
     ]
     for ok, msg in checks:
         if not ok:
@@ -99,6 +100,7 @@ class FieldMethod(ABC):
         self.K = data.K.to(device)
         self.background = data.background.to(device)
         self.views = data.reference_views()
+        self.distortions: list[Tensor] = []
 
     def rays(self, c2w: Tensor, px: Tensor, py: Tensor) -> tuple[Tensor, Tensor]:
         return pixel_rays(c2w.to(self.device), self.K, px.to(self.device), py.to(self.device))
@@ -109,7 +111,13 @@ class FieldMethod(ABC):
         stats: dict[str, Tensor] = {}
         rgb = render_rays(model.tensors(), origins, dirs, self.background, jitter, stats)[0]
         model.record_weights(stats["voxels"], stats["weights"])
+        self.distortions.append(stats["distortion"].mean())
         return rgb
+
+    def take_distortion(self) -> Tensor | None:
+        """Mean distortion of the rays rendered since the last call (None when none were)."""
+        d, self.distortions = self.distortions, []
+        return torch.stack(d).mean() if d else None
 
     def pixels(self, n: int, gen: torch.Generator) -> tuple[Tensor, Tensor]:
         """``n`` random pixel indices (column, row)."""

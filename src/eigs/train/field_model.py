@@ -1,5 +1,6 @@
-"""The trainable voxel-grid radiance field: the box from the initial points, the grid (one leaf tensor of raw
-density and colour), coarse-to-fine growth, the occupancy mask, total variation, export to the model file.
+"""The trainable voxel-grid radiance field: the box from the initial points, the warp (a finer core around the
+object), the grid (one leaf tensor of raw density and colour), coarse-to-fine growth, the occupancy mask, total
+variation, export to the model file.
 
 Shapes: ``grid`` (1, 1 + C, Z, Y, X) (x the last axis); the box [lo, hi] in world units of the canonical SfM frame.
 """
@@ -43,17 +44,63 @@ def field_box(
     return lo, hi
 
 
-def grid_shape(lo: np.ndarray, hi: np.ndarray, voxels: int) -> tuple[int, int, int]:
-    """(Z, Y, X) corner counts for about ``voxels`` cubic voxels over the box (each ≥ 2)."""
-    ext = np.asarray(hi, np.float64) - np.asarray(lo, np.float64)
+def core_box(
+    points: np.ndarray, lo: np.ndarray, hi: np.ndarray, opts: FieldOptions
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """The core of the field, where its voxels are ``core_ratio`` times finer than in the rest of the box: per axis
+    the ``box_quantile`` .. 1 − ``box_quantile`` range of the points (N, 3) within ``core_radius`` of the origin
+    (the cameras' centre in the canonical frame: the object and the floor around it), padded by ``box_margin`` ×
+    its extent, inside the box. None (a uniform grid) when ``core_ratio`` is 1 or fewer than 8 points are near."""
+    if opts.core_ratio <= 1.0:
+        return None
+    p = np.asarray(points, np.float64).reshape(-1, 3)
+    p = p[np.all(np.isfinite(p), axis=1)]
+    p = p[np.linalg.norm(p, axis=1) <= opts.core_radius]
+    if p.shape[0] < 8:
+        return None
+    a, b = np.quantile(p, opts.box_quantile, axis=0), np.quantile(p, 1.0 - opts.box_quantile, axis=0)
+    pad = opts.box_margin * (b - a)
+    eps = 1e-3 * (np.asarray(hi) - np.asarray(lo))  # every segment of the warp keeps a positive length
+    a = np.clip(a - pad, lo + eps, hi - 3 * eps)
+    b = np.clip(b + pad, a + eps, hi - eps)
+    return a, b
+
+
+def make_warp(lo: np.ndarray, hi: np.ndarray, core: tuple[np.ndarray, np.ndarray] | None,
+              ratio: float) -> tuple[np.ndarray | None, np.ndarray]:  # fmt: skip
+    """The warp (2, 3, 4) of the box with a core [a, b] whose voxels are ``ratio`` times finer than the shells'
+    (knots lo, a, b, hi ↦ the cumulative lengths in core-voxel units, normalised), and the box's extent (3,) in
+    core-voxel units (what the grid's corner counts follow). Without a core: (None, hi − lo)."""
+    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+    if core is None:
+        return None, hi - lo
+    xs = np.stack([lo, core[0], core[1], hi], axis=1)  # (3, 4)
+    eff = np.diff(xs, axis=1) / np.array([ratio, 1.0, ratio])  # (3, 3) segment lengths in core units
+    extent = eff.sum(axis=1)
+    us = np.concatenate([np.zeros((3, 1)), np.cumsum(eff, axis=1)], axis=1) / extent[:, None]
+    us[:, -1] = 1.0
+    return np.stack([xs, us]), extent
+
+
+def warp_np(warp: np.ndarray | None, lo: np.ndarray, hi: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Normalised grid coordinates (N, 3) in [0, 1] of world points (N, 3) (NumPy; the renderer's map)."""
+    p = np.asarray(points, np.float64)
+    if warp is None:
+        return np.clip((p - lo) / (hi - lo), 0.0, 1.0)
+    return np.stack([np.interp(p[:, a], warp[0, a], warp[1, a]) for a in range(3)], axis=1)
+
+
+def grid_shape(extent: np.ndarray, voxels: int) -> tuple[int, int, int]:
+    """(Z, Y, X) corner counts for about ``voxels`` cubic voxels over a box of ``extent`` (3,) (each ≥ 2)."""
+    ext = np.asarray(extent, np.float64)
     size = (float(np.prod(ext)) / max(voxels, 1)) ** (1.0 / 3.0)
     n = np.maximum(np.round(ext / size).astype(int) + 1, 2)
     return int(n[2]), int(n[1]), int(n[0])
 
 
-def grid_voxels(lo: np.ndarray, hi: np.ndarray, voxels: int) -> int:
+def grid_voxels(extent: np.ndarray, voxels: int) -> int:
     """Corner count of the grid :func:`grid_shape` gives for ``voxels``."""
-    return int(np.prod(grid_shape(lo, hi, voxels)))
+    return int(np.prod(grid_shape(extent, voxels)))
 
 
 def voxel_schedule(opts: FieldOptions, steps: int) -> list[tuple[int, int]]:
@@ -86,7 +133,9 @@ class FieldModel:
         self.lo_np, self.hi_np = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
         self.lo = torch.tensor(self.lo_np, dtype=torch.float32, device=device)
         self.hi = torch.tensor(self.hi_np, dtype=torch.float32, device=device)
-        shape = grid_shape(self.lo_np, self.hi_np, opts.voxels_start)
+        core = core_box(points, self.lo_np, self.hi_np, opts) if points is not None else None
+        self.warp, self.extent = make_warp(self.lo_np, self.hi_np, core, opts.core_ratio)
+        shape = grid_shape(self.extent, opts.voxels_start)
         self.grid = torch.zeros((1, 1 + channels, *shape), device=device).requires_grad_(True)
         self.occupancy = torch.ones(shape, dtype=torch.bool, device=device)
         self.max_weight = torch.zeros(shape, device=device)  # per voxel, since the last occupancy update
@@ -101,8 +150,8 @@ class FieldModel:
         of those points and the density of α = 0.5 over one voxel edge."""
         z, y, x = self.grid.shape[2:]
         dims = np.array([x, y, z], np.float64)
-        idx = np.round((points - self.lo_np) / (self.hi_np - self.lo_np) * (dims - 1)).astype(np.int64)
-        inside = np.all((idx >= 0) & (idx < dims.astype(np.int64)), axis=1)
+        inside = np.all((points >= self.lo_np) & (points <= self.hi_np), axis=1)
+        idx = np.round(warp_np(self.warp, self.lo_np, self.hi_np, points) * (dims - 1)).astype(np.int64)
         idx, colours = idx[inside], colours[inside]
         if not len(idx):
             return
@@ -115,8 +164,7 @@ class FieldModel:
         vol = F.avg_pool3d(vol, kernel_size=3, stride=1, padding=1, count_include_pad=False)[0]
         near = vol[0] > 0
         mean = (vol[1:] / vol[:1].clamp_min(1e-12)).clamp(0.02, 0.98)
-        voxel = float(np.min((self.hi_np - self.lo_np) / (dims - 1)))
-        sigma = math.log(2.0) / voxel
+        sigma = math.log(2.0) / self.voxel_size()
         raw_density = math.log(math.expm1(sigma)) - self.density_shift
         g = self.grid.detach().clone()
         g[0, 0][near] = raw_density
@@ -132,21 +180,28 @@ class FieldModel:
     def n_voxels(self) -> int:
         return int(np.prod(self.grid.shape[2:]))
 
+    def voxel_size(self) -> float:
+        """Edge of the finest voxels (the core's), world units."""
+        z, y, x = self.grid.shape[2:]
+        return float(np.min(self.extent / (np.array([x, y, z], np.float64) - 1)))
+
     def n_samples(self) -> int:
         """Samples per ray on the current grid: ``n_samples`` × its resolution relative to the final grid (≥ 16)."""
         o = self.opts
-        rel = (self.n_voxels / grid_voxels(self.lo_np, self.hi_np, o.voxels_final)) ** (1.0 / 3.0)
+        rel = (self.n_voxels / grid_voxels(self.extent, o.voxels_final)) ** (1.0 / 3.0)
         return max(min(int(round(o.n_samples * rel)), o.n_samples), min(16, o.n_samples))
 
     def tensors(self) -> FieldTensors:
         o = self.opts
-        return FieldTensors(self.grid, self.lo, self.hi, self.occupancy, self.density_shift, self.n_samples(), o.near)
+        return FieldTensors(
+            self.grid, self.lo, self.hi, self.occupancy, self.density_shift, self.n_samples(), o.near, self.warp
+        )
 
     # ------------------------------------------------------------------ growth and occupancy
     @torch.no_grad()
     def grow(self, voxels: int) -> None:
         """Resample the grid (trilinear, corners aligned) to about ``voxels`` voxels; occupancy follows (nearest)."""
-        shape = grid_shape(self.lo_np, self.hi_np, voxels)
+        shape = grid_shape(self.extent, voxels)
         new = F.interpolate(self.grid.detach(), size=shape, mode="trilinear", align_corners=True)
         occ = F.interpolate(self.occupancy[None, None].float(), size=shape, mode="nearest")[0, 0] > 0
         self.max_weight = F.interpolate(self.max_weight[None, None], size=shape, mode="nearest")[0, 0]
@@ -154,8 +209,9 @@ class FieldModel:
         self.occupancy = occ
 
     def sample_interval(self) -> float:
-        """Length of one sample interval of the longest ray through the box (its diagonal / n_samples)."""
-        return float(np.linalg.norm(self.hi_np - self.lo_np)) / self.opts.n_samples
+        """Length of one sample interval of the longest ray through the box on the current grid (its diagonal /
+        :meth:`n_samples`); every other interval, and every later one (more samples on finer grids), is shorter."""
+        return float(np.linalg.norm(self.hi_np - self.lo_np)) / self.n_samples()
 
     @torch.no_grad()
     def record_weights(self, voxels: Tensor, weights: Tensor) -> None:
@@ -182,6 +238,30 @@ class FieldModel:
 
         return tv(g[:1]), tv(g[1:])
 
+    @torch.no_grad()
+    def add_total_variation_grad(self, w_density: float, w_colour: float) -> float:
+        """Add the gradient of ``w_density`` · TV(density) + ``w_colour`` · TV(colour) (:meth:`total_variation`'s
+        terms) to ``grid.grad`` in place, without autograd (three slab differences per axis instead of a graph
+        over the whole grid). Returns the weighted value. ``grid.grad`` must exist (after ``backward``)."""
+        g, grad = self.grid[0], self.grid.grad[0]  # type: ignore[index]
+        total = 0.0
+        for sl, w in ((slice(0, 1), w_density), (slice(1, None), w_colour)):
+            if w <= 0:
+                continue
+            x, gx = g[sl], grad[sl]
+            for d in (1, 2, 3):
+                n = x.shape[d]
+                if n < 2:
+                    continue
+                diff = x.narrow(d, 1, n - 1) - x.narrow(d, 0, n - 1)
+                scale = w / (3.0 * diff.numel())
+                flat = diff.reshape(-1)
+                total += scale * float(torch.dot(flat, flat))
+                diff.mul_(2.0 * scale)
+                gx.narrow(d, 1, n - 1).add_(diff)
+                gx.narrow(d, 0, n - 1).sub_(diff)
+        return total
+
     def to_arrays(self) -> FieldArrays:
         o = self.opts
         return FieldArrays(
@@ -192,6 +272,7 @@ class FieldModel:
             density_shift=float(self.density_shift),
             n_samples=self.n_samples(),
             near=float(o.near),
+            warp=None if self.warp is None else self.warp.copy(),
         )
 
     def state_dict(self) -> dict:
