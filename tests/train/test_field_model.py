@@ -1,12 +1,14 @@
 """The field model's pieces without training: the in-place total-variation gradient against autograd of the
-TV formula in float64, the warp's grid (finer core corners, seeding through the warp)."""
+TV formula in float64, the warp's grid (finer core corners, seeding through the warp), the default budgets."""
 
 from __future__ import annotations
 
 import numpy as np
 import torch
 
-from eigs.train.field_config import FieldOptions
+from eigs.train.cli import resolve_steps
+from eigs.train.config import TrainConfig
+from eigs.train.field_config import FIELD_METHODS, FieldOptions, FieldSteps, field_default_steps
 from eigs.train.field_model import FieldModel, warp_np
 
 
@@ -63,3 +65,13 @@ def test_core_grid_is_finer_and_seeding_goes_through_the_warp():
     raw = m.grid.detach()[0, 0].numpy()[idx[:, 2], idx[:, 1], idx[:, 0]]
     assert np.all(raw > 0) and float((m.grid.detach()[0, 0] > 0).float().mean()) < 0.5
 
+
+def test_every_field_method_has_a_default_budget_that_eigs_train_uses():
+    assert {m.replace("-", "_") for m in FIELD_METHODS} == set(FieldSteps.__dataclass_fields__)
+    for m in FIELD_METHODS:
+        values = TrainConfig.from_dict({"method": m}).to_dict()
+        assert resolve_steps(values, {}, None) == field_default_steps(m) == getattr(FieldSteps(), m.replace("-", "_"))
+        assert resolve_steps({**values, "steps": 77}, {"steps": 77}, None) == 77  # the run's own steps win
+        assert resolve_steps(values, {}, 12) == 12  # --steps wins
+    gaussian = TrainConfig.from_dict({"method": "3dgs"}).to_dict()
+    assert resolve_steps(gaussian, {}, None) == TrainConfig().steps

@@ -20,14 +20,28 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         default="{}",
         metavar="JSON",
         help="training options as a JSON object (keys of eigs.train.config.TrainConfig; the workflow passes the "
-        "run's `options:` here)",
+        "run's `options:` here); a field method without `steps` trains for its default budget "
+        "(eigs.train.field_config.FieldSteps)",
     )
     p.add_argument("--steps", type=int, default=None, help="override the number of steps")
     p.add_argument("--device", default="auto", choices=("auto", "cpu", "cuda"), help="auto: CUDA when available")
     p.add_argument("--list", action="store_true", help="list the methods and exit")
 
 
+def resolve_steps(values: dict, given: dict, steps_arg: int | None) -> int:
+    """The run's step count: ``--steps``, else the ``--config`` JSON's ``steps`` (``given``), else for a field method
+    its own budget (:class:`eigs.train.field_config.FieldSteps`), else the resolved ``values["steps"]``."""
+    from eigs.train.field_config import FIELD_METHODS, field_default_steps
+
+    if steps_arg is not None:
+        return int(steps_arg)
+    if "steps" not in given and values["method"] in FIELD_METHODS:
+        return field_default_steps(values["method"])
+    return int(values["steps"])
+
+
 def run(args: argparse.Namespace) -> int:
+    import json
     import logging
 
     import torch
@@ -51,8 +65,7 @@ def run(args: argparse.Namespace) -> int:
     values = cfg.to_dict()
     if args.method is not None:
         values["method"] = args.method
-    if args.steps is not None:
-        values["steps"] = args.steps
+    values["steps"] = resolve_steps(values, json.loads(args.config or "{}"), args.steps)
     cfg = TrainConfig.from_dict(values, where="command line")
     if args.device == "cuda" and not torch.cuda.is_available():
         raise EigsError("--device", "cuda requested but no CUDA device is available")

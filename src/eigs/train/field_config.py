@@ -86,6 +86,25 @@ class E2NerfOptions:
     lambda_event: float = 0.001  # E²NeRF code's weight beside its MSE blur loss (../shared/docs/edi-and-events.md §4)
 
 
+@dataclass(frozen=True)
+class FieldSteps:
+    """The default budget (optimiser steps) of each field method: what ``eigs train`` uses when neither the run's
+    options nor ``--steps`` set ``steps`` (TrainConfig's 3000 is the Gaussian methods'). Set by the time budget, not
+    by a plateau: the four runs of a scene one after another (the workflow's 2 threads each) within the tables
+    issue's 15 minutes per scene, from the measured per-step cost (docs/results.md, "The NeRF columns"); the fields
+    are still improving at this budget."""
+
+    nerf: int = 800
+    deblur_nerf: int = 800
+    edi_nerf: int = 800
+    e2nerf: int = 800
+
+
+def field_default_steps(method: str) -> int:
+    """:class:`FieldSteps`' budget of the field method ``method`` (``deblur-nerf`` → ``deblur_nerf``)."""
+    return int(getattr(FieldSteps(), method.replace("-", "_")))
+
+
 def options_dict(*parts: Any) -> dict[str, Any]:
     """The defaults of several option dataclasses as one mapping (tuples as lists, as JSON gives them)."""
     out: dict[str, Any] = {}
