@@ -63,12 +63,12 @@ def test_default_config_schedules_every_table_variant():
     proc = snakemake("all", "-n", "--forceall", "--cores", "2", "--configfile=config/config.yaml")
     assert proc.returncode == 0, proc.stdout + proc.stderr
     counts = job_counts(proc.stdout)
-    # 24 runs on 6 scenes (20 Gaussian, 4 radiance-field), each evaluated; EDI/SfM/init at B = 4, 6, 8
-    assert counts["train"] == 120 and counts["train_field"] == 24 and counts["evaluate"] == 144
+    # 25 runs on 6 scenes (21 Gaussian, 4 radiance-field), each evaluated; EDI/SfM/init at B = 4, 6, 8
+    assert counts["train"] == 126 and counts["train_field"] == 24 and counts["evaluate"] == 150
     assert counts["edi"] == counts["sfm"] == counts["init"] == 18
     assert counts["tables"] == counts["figures"] == 1
-    # shared runs are trained once: eigs feeds Tables I-V from one folder per scene
-    assert proc.stdout.count("output: results/chair/b4/eigs/model.ply") == 1
+    # shared runs are trained once: eigs+ feeds Tables I-V from one folder per scene
+    assert proc.stdout.count("output: results/chair/b4/eigs+/model.ply") == 1
     assert "results/chair/b6/eigs-b6/model.ply" in proc.stdout
     assert '"width":64' in proc.stdout
 
@@ -93,10 +93,10 @@ def test_e2nerf_config_dry_runs_on_an_exported_layout(tmp_path):
     proc = snakemake("all", "-n", "--forceall", "--cores", "2", f"--configfile={cfg}")
     assert proc.returncode == 0, proc.stdout + proc.stderr
     counts = job_counts(proc.stdout)
-    # 11 scenes ingested; 18 Gaussian runs, oracle only on the 6 synthetic scenes: 17·11 + 6 = 193; 4 field runs:
+    # 11 scenes ingested; 19 Gaussian runs, oracle only on the 6 synthetic scenes: 18·11 + 6 = 204; 4 field runs:
     # 4·11 = 44
-    assert counts["ingest"] == 11 and counts["train"] == 193 and counts["train_field"] == 44
-    assert counts["evaluate"] == 193 + 44
+    assert counts["ingest"] == 11 and counts["train"] == 204 and counts["train_field"] == 44
+    assert counts["evaluate"] == 204 + 44
     assert "--format e2nerf-synthetic" in proc.stdout and "--format e2nerf-real" in proc.stdout
     assert '"steps":30000' in proc.stdout
     assert '"6":null' in proc.stdout  # Table III's N = 6, 8 rows: paper values only
