@@ -67,6 +67,18 @@ def empty_figure(path: Path, what: str) -> None:
     plt.close(f)
 
 
+def finish_log_x_plot(plt, f, ax, fig: Path, xlabel: str, ylabel: str) -> None:
+    """Log-scaled x axis, labels, legend and grid on ``ax``; save figure ``f`` to ``fig`` and close it."""
+    ax.set_xscale("log")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.legend(fontsize=7)
+    ax.grid(alpha=0.3)
+    f.tight_layout()
+    f.savefig(fig, dpi=110)
+    plt.close(f)
+
+
 # --- EDI: latent frames' PSNR against time per scene, over B and mode --------------------------------------------
 def edi_overview(doc: dict | None, fig: Path) -> str:
     rows = (doc or {}).get("data", {}) or {}
@@ -87,14 +99,7 @@ def edi_overview(doc: dict | None, fig: Path) -> str:
     fx = sorted(front)
     ax.plot([p[0] for p in fx], [-p[1] for p in fx], "k--", lw=1, label="Pareto front")
     ax.axhline(mean([r["blurry_psnr"] for r in rows]), color="grey", lw=0.8, ls=":", label="blurry frame")
-    ax.set_xscale("log")
-    ax.set_xlabel("EDI time per scene (s)")
-    ax.set_ylabel("latent-frame PSNR (dB)")
-    ax.legend(fontsize=7)
-    ax.grid(alpha=0.3)
-    f.tight_layout()
-    f.savefig(fig, dpi=110)
-    plt.close(f)
+    finish_log_x_plot(plt, f, ax, fig, "EDI time per scene (s)", "latent-frame PSNR (dB)")
     trows = [[r["bins"], r["mode"], fmt(r["time_s"]), f"{r['time_s'] / ref['time_s']:.3g}×",
               f"{r['latent_psnr']:.2f}", "yes" if (r["time_s"], -r["latent_psnr"]) in front else ""]
              for r in sorted(rows, key=lambda r: (r["mode"], r["bins"]))]  # fmt: skip
@@ -124,14 +129,7 @@ def sfm_overview(doc: dict | None, fig: Path) -> str:
         ax.scatter([r["time_s"] for r in sel], [r["ate_percent"] for r in sel], label=label)
     fx = sorted(front)
     ax.plot([p[0] for p in fx], [p[1] for p in fx], "k--", lw=1, label="Pareto front")
-    ax.set_xscale("log")
-    ax.set_xlabel("SfM time per scene (s)")
-    ax.set_ylabel("ATE (% of the extent)")
-    ax.legend(fontsize=7)
-    ax.grid(alpha=0.3)
-    f.tight_layout()
-    f.savefig(fig, dpi=110)
-    plt.close(f)
+    finish_log_x_plot(plt, f, ax, fig, "SfM time per scene (s)", "ATE (% of the extent)")
     trows = [[r["scene"], k, fmt(r["time_s"]), f"{r['time_s'] / ref_t:.3g}×", fmt(r["ate_percent"]),
               "yes" if (r["time_s"], r["ate_percent"]) in front else ""] for k, r in pts]  # fmt: skip
     return (
