@@ -79,6 +79,24 @@ def finish_log_x_plot(plt, f, ax, fig: Path, xlabel: str, ylabel: str) -> None:
     plt.close(f)
 
 
+def bar_figure(fig: Path, labels: list[str], values: list[float], notes: list[str], xlabel: str,
+               size: tuple[float, float], log_x: bool = False) -> None:
+    """Horizontal bars of ``values`` named by ``labels`` (first at the top), each annotated with its note."""
+    plt = _plt()
+    f, ax = plt.subplots(figsize=size)
+    if labels:
+        ax.barh(labels, values)
+        for i, (v, note) in enumerate(zip(values, notes, strict=True)):
+            ax.text(v, i, note, va="center", fontsize=7)
+        if log_x:
+            ax.set_xscale("log")
+        ax.invert_yaxis()
+    ax.set_xlabel(xlabel)
+    f.tight_layout()
+    f.savefig(fig, dpi=110)
+    plt.close(f)
+
+
 # --- EDI: latent frames' PSNR against time per scene, over B and mode --------------------------------------------
 def edi_overview(doc: dict | None, fig: Path) -> str:
     rows = (doc or {}).get("data", {}) or {}
@@ -188,18 +206,8 @@ def train_overview(doc: dict | None, fig: Path) -> str:
     if not rows:
         empty_figure(fig, "training step")
         return ""
-    plt = _plt()
-    f, ax = plt.subplots(figsize=(6, 0.3 * len(rows) + 1))
-    names = [r["method"] for r in rows]
-    ms = [float(r["step_ms"]) for r in rows]
-    ax.barh(names, ms)
-    for i, r in enumerate(rows):
-        ax.text(ms[i], i, f" {r['ratio_3dgs']}", va="center", fontsize=7)
-    ax.invert_yaxis()
-    ax.set_xlabel("one training step (ms)")
-    f.tight_layout()
-    f.savefig(fig, dpi=110)
-    plt.close(f)
+    bar_figure(fig, [r["method"] for r in rows], [float(r["step_ms"]) for r in rows],
+               [f" {r['ratio_3dgs']}" for r in rows], "one training step (ms)", (6, 0.3 * len(rows) + 1))
     return (
         f"### Training step of every method\n\n![training step](figures/{fig.name})\n\nRatios to the `3dgs` step of "
         f"the same run (one render); scene `{doc['data'].get('scene')}`, {doc['data'].get('threads')} threads."
@@ -322,18 +330,8 @@ def skips(d: Path, facts: dict, fig: Path) -> str:
         "(params trigger; tests/test_workflow_skips.py)", None if None in (synth_s, edi_s, colmap_s)
         else synth_s + edi_s + colmap_s, " per scene (synth + EDI + SfM)", "none (the same files)",
         "synth.json, edi.json, sfm.json")  # fmt: skip
-    plt = _plt()
-    f, ax = plt.subplots(figsize=(7, 0.45 * max(len(saved), 1) + 1))
-    if saved:
-        ax.barh([w for w, _ in saved], [v for _, v in saved])
-        for i, (_, v) in enumerate(saved):
-            ax.text(v, i, f" {v:.3g} s", va="center", fontsize=7)
-        ax.set_xscale("log")
-        ax.invert_yaxis()
-    ax.set_xlabel("time saved (s, unit in the table)")
-    f.tight_layout()
-    f.savefig(fig, dpi=110)
-    plt.close(f)
+    bar_figure(fig, [w for w, _ in saved], [v for _, v in saved], [f" {v:.3g} s" for _, v in saved],
+               "time saved (s, unit in the table)", (7, 0.45 * max(len(saved), 1) + 1), log_x=True)
     return (
         "## What a scene does not need (skips)\n\nEach skip, the time it saves (from this run's measurements) and "
         "what it changes in quality. The dry-run side (jobs not scheduled) is tested in "
