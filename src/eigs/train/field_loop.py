@@ -16,7 +16,6 @@ import json
 import logging
 import math
 import platform
-import shutil
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -33,7 +32,7 @@ from eigs.train.config import TrainConfig
 from eigs.train.data import TrainData
 from eigs.train.field_methods import FieldMethod, make_field_method
 from eigs.train.field_model import FieldModel, field_box, lr_at, voxel_schedule
-from eigs.train.loop import log_csv, partial_dir_of, run_steps
+from eigs.train.loop import complete_run, log_csv, resume_from_partial, run_steps
 from eigs.util.atomic import atomic_path
 
 log = logging.getLogger(__name__)
@@ -200,11 +199,8 @@ def train_field(
     many steps (checkpoint written, no outputs) — for tests of resumption."""
     device = device or torch.device("cpu")
     run_dir = Path(run_dir)
-    partial = partial_dir_of(run_dir)
-    ckpt = partial / "checkpoint.pt"
     tr = FieldTrainer(data, cfg, device)
-    if ckpt.exists():
-        tr.load_checkpoint(ckpt)
+    ckpt = resume_from_partial(tr, run_dir)
     m = tr.model
     log.info("%s: %d steps, box %s .. %s, grid %s, device %s", cfg.method, cfg.steps, np.round(m.lo_np, 3),
              np.round(m.hi_np, 3), tuple(m.grid.shape[2:]), device)  # fmt: skip
@@ -216,10 +212,8 @@ def train_field(
         f"({100 * tr.occupied:.1f}% occupied)  PSNR novel {row['psnr_novel']:.2f} dB",
         has_held_out=data.held_out is not None,
     )  # fmt: skip
-    if stopped:
-        return FieldRunResult(tr.model, tr.method, tr.rows, tr.wall, tr.skipped)
-    write_field_run(tr, run_dir, inputs or {})
-    shutil.rmtree(partial, ignore_errors=True)
+    if not stopped:
+        complete_run(run_dir, lambda: write_field_run(tr, run_dir, inputs or {}))
     return FieldRunResult(tr.model, tr.method, tr.rows, tr.wall, tr.skipped)
 
 

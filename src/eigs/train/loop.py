@@ -245,11 +245,8 @@ def train(
     (checkpoint written, no outputs) — for tests of resumption."""
     device = device or torch.device("cpu")
     run_dir = Path(run_dir)
-    partial = partial_dir_of(run_dir)
-    ckpt = partial / "checkpoint.pt"
     tr = Trainer(data, cfg, device)
-    if ckpt.exists():
-        tr.load_checkpoint(ckpt)
+    ckpt = resume_from_partial(tr, run_dir)
     log.info(
         "%s: %d steps, %d samples, %d Gaussians, extent %.3f, device %s",
         cfg.method, cfg.steps, tr.method.n_samples(), len(tr.model), tr.extent, device,
@@ -264,11 +261,23 @@ def train(
         f"{row['psnr_novel']:.2f} dB",
         has_held_out=data.held_out is not None,
     )  # fmt: skip
-    if stopped:
-        return RunResult(tr.model, tr.method, tr.rows, tr.wall, tr.skipped)
-    write_run(tr, run_dir, inputs or {})
-    shutil.rmtree(partial, ignore_errors=True)
+    if not stopped:
+        complete_run(run_dir, lambda: write_run(tr, run_dir, inputs or {}))
     return RunResult(tr.model, tr.method, tr.rows, tr.wall, tr.skipped)
+
+
+def resume_from_partial(tr: Any, run_dir: Path) -> Path:
+    """The checkpoint path of ``run_dir`` (in its ``.partial`` sibling); ``tr`` resumes from it when it exists."""
+    ckpt = partial_dir_of(run_dir) / "checkpoint.pt"
+    if ckpt.exists():
+        tr.load_checkpoint(ckpt)
+    return ckpt
+
+
+def complete_run(run_dir: Path, write: Callable[[], None]) -> None:
+    """Write the run folder with ``write()``, then drop the ``.partial`` checkpoints it no longer needs."""
+    write()
+    shutil.rmtree(partial_dir_of(run_dir), ignore_errors=True)
 
 
 def run_steps(
