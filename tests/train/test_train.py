@@ -66,6 +66,19 @@ def test_killed_run_resumes_to_the_same_parameters(data, tmp_path):
     assert [r["loss"] for r in a] == [r["loss"] for r in b]
 
 
+def test_run_stopped_part_way_through_a_longer_schedule(data, tmp_path):
+    # steps=130 of a 200-step schedule (lr decay, densification window) is the first 130 steps of the 200-step run
+    long = train(data, _cfg(method="3dgs", steps=200, reset_every=0), tmp_path / "long", stop_after=130)
+    short_cfg = _cfg(method="3dgs", steps=130, schedule_steps=200)
+    assert (short_cfg.horizon, short_cfg.refine_stop, _cfg(steps=130).refine_stop) == (200, 120, 78)
+    short = train(data, short_cfg, tmp_path / "short")
+    assert len(short.model) == len(long.model)
+    for name, t in long.model.params.items():
+        torch.testing.assert_close(short.model.params[name], t, rtol=0, atol=0, msg=name)
+    with pytest.raises(EigsError, match="schedule_steps"):
+        _cfg(schedule_steps=-1).validate()
+
+
 def test_checkpoint_of_another_config_is_ignored(data, tmp_path):
     train(data, _cfg(method="3dgs", steps=100), tmp_path / "run", stop_after=50)
     res = train(data, _cfg(method="3dgs", steps=100, seed=1), tmp_path / "run")

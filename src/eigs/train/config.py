@@ -23,6 +23,9 @@ class TrainConfig:
 
     method: str = "3dgs"
     steps: int = 3000
+    # length of the schedules (position lr decay, densification window); 0 = `steps`. A run with steps < this stops
+    # part-way through a longer schedule: it equals the first `steps` steps of the run with steps = schedule_steps
+    schedule_steps: int = 0
     seed: int = 0
     sh_degree: int = 0
     sh_degree_interval: int = 1000  # raise the active SH degree by one every this many steps (3DGS)
@@ -56,6 +59,7 @@ class TrainConfig:
     def validate(self, where: str = "train config") -> None:
         checks = [
             (self.steps >= 1, "steps must be >= 1"),
+            (self.schedule_steps >= 0, "schedule_steps must be >= 0 (0 = steps)"),
             (0 <= self.sh_degree <= 3, "sh_degree must lie in 0..3"),
             (self.sh_degree_interval >= 1, "sh_degree_interval must be >= 1"),
             (0 <= self.lambda_dssim <= 1, "lambda_dssim must lie in [0, 1]"),
@@ -73,8 +77,13 @@ class TrainConfig:
                 raise EigsError(where, msg)
 
     @property
+    def horizon(self) -> int:
+        """Steps the schedules span: ``schedule_steps``, or ``steps`` when it is 0."""
+        return self.schedule_steps or self.steps
+
+    @property
     def refine_stop(self) -> int:
-        return int(self.refine_stop_frac * self.steps)
+        return int(self.refine_stop_frac * self.horizon)
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)

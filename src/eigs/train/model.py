@@ -129,8 +129,9 @@ def make_optimizer(model: GaussianModel, cfg: TrainConfig, extent: float) -> tor
 
 
 def means_lr(cfg: TrainConfig, extent: float, step: int) -> float:
-    """Exponential decay of the position learning rate from ``lr_means`` to ``lr_means_final`` over the run."""
-    t = min(max(step / max(cfg.steps, 1), 0.0), 1.0)
+    """Exponential decay of the position learning rate from ``lr_means`` to ``lr_means_final`` over the schedule
+    (``cfg.horizon`` steps: the run, or the longer schedule the run stops in)."""
+    t = min(max(step / max(cfg.horizon, 1), 0.0), 1.0)
     a, b = cfg.lr_means * extent, cfg.lr_means_final * extent
     if a <= 0 or b <= 0:
         return a * (1 - t) + b * t
