@@ -3,8 +3,10 @@ jobs are independent except for their inputs (synth → edi → sfm → init per
 tables and figures last). Jobs take their rule's threads (config `threads`; init, resources, evaluate, tables and
 figures 1), a job starts as soon as its inputs exist and enough cores are free, longest remaining path first.
 
-Per-job seconds come from a finished run's Snakemake benchmark files (``DIR/benchmarks/<rule>/<name>.tsv``, the ``s``
-column) or, for jobs not run there, from ``--estimate RULE[:RUN]=SECONDS`` (e.g. ``train:eigs=318``); a job with
+Per-job seconds come from a finished run's Snakemake benchmark files (``DIR/benchmarks/<rule>/<name>.tsv``: the
+wall-clock ``s`` column, or with ``--column cpu_time`` the CPU seconds divided by the job's threads, which is the
+wall time the job would take alone when other work shared the cores while it ran) or, for jobs not run there,
+from ``--estimate RULE[:RUN]=SECONDS`` (e.g. ``train:eigs=318``); a job with
 neither is an error naming it.
 
 Run: ``.venv/bin/python bench/schedule.py --config config/toy.yaml --directory /path/of/a/run --cores 1 2 8``
@@ -51,11 +53,15 @@ def jobs_of(cfg: dict) -> dict[str, tuple[str, list[str], int]]:
     return jobs
 
 
-def seconds(directory: Path | None, name: str, estimates: dict[str, float]) -> float:
+def seconds(
+    directory: Path | None, name: str, estimates: dict[str, float], column: str = "s", threads: int = 1
+) -> float:
     if directory is not None:
         p = directory / "benchmarks" / f"{name}.tsv"
         if p.exists():
             rows = list(csv.DictReader(p.open(), delimiter="\t"))
+            if column == "cpu_time":
+                return float(rows[-1]["cpu_time"]) / max(threads, 1)
             return float(rows[-1]["s"])
     rule, _, rest = name.partition("/")
     run = rest.rsplit("_", 1)[-1] if rule in ("train", "evaluate") else ""
@@ -111,11 +117,17 @@ def main() -> None:
     ap.add_argument("--directory", type=Path, default=None, help="workflow directory with a finished run's benchmarks/")
     ap.add_argument("--cores", type=int, nargs="+", default=[2, 8])
     ap.add_argument("--estimate", action="append", default=[], metavar="RULE[:RUN]=SECONDS")
+    ap.add_argument(
+        "--column",
+        choices=("s", "cpu_time"),
+        default="s",
+        help="wall seconds, or CPU seconds per thread (for runs that shared the cores with other work)",
+    )
     args = ap.parse_args()
     cfg = yaml.safe_load(Path(args.config).read_text())
     est = {k: float(v) for k, v in (e.split("=", 1) for e in args.estimate)}
     jobs = jobs_of(cfg)
-    times = {j: seconds(args.directory, jobs[j][0], est) for j in jobs}
+    times = {j: seconds(args.directory, jobs[j][0], est, args.column, jobs[j][2]) for j in jobs}
     print(f"{len(jobs)} jobs, {sum(times.values()) / 3600:.2f} h of job time in total")
     for c in args.cores:
         print(f"--cores {c}: {simulate(jobs, times, c) / 3600:.2f} h")
