@@ -175,15 +175,17 @@ def guided_match(
                 if np.linalg.norm(t) < 1e-9 * max(1.0, np.linalg.norm(c2w[a][:3, 3])):
                     continue  # identical centres (copied poses): no epipolar geometry
                 E = _skew(t) @ rel[:3, :3]  # x_bᵀ E x_a = 0 in normalised coordinates
-                la = np.einsum("ij,nj->ni", E, rays[a])  # epipolar lines in b of the points of a
-                lb = np.einsum("ji,nj->ni", E, rays[b])  # lines in a of the points of b
-                num = np.abs(np.einsum("ik,jk->ij", la, rays[b]))  # (Na, Nb) |x_bᵀ E x_a|
-                da = num / np.maximum(np.linalg.norm(la[:, :2], axis=1), 1e-12)[:, None]  # distance in image b
-                db_ = num / np.maximum(np.linalg.norm(lb[:, :2], axis=1), 1e-12)[None, :]  # distance in image a
-                band = (da * fpx[b] <= max_epipolar_px) & (db_ * fpx[a] <= max_epipolar_px)
-                dist = np.sqrt(np.maximum(2.0 - 2.0 * sims[:, offsets[j] : offsets[j + 1]], 0.0))
-                dist[~band] = np.inf
-                m = _mutual_ratio(dist, GUIDED_RATIO)
+                la = rays[a] @ E.T  # (Na, 3) epipolar lines in b of the points of a
+                lb = rays[b] @ E  # (Nb, 3) lines in a of the points of b
+                num = np.abs(la @ rays[b].T)  # (Na, Nb) |x_bᵀ E x_a|
+                m = band_matches(
+                    sims[:, offsets[j] : offsets[j + 1]],
+                    num,
+                    fpx[b] / np.maximum(np.linalg.norm(la[:, :2], axis=1), 1e-12),
+                    fpx[a] / np.maximum(np.linalg.norm(lb[:, :2], axis=1), 1e-12),
+                    max_epipolar_px,
+                    GUIDED_RATIO,
+                )
                 if len(m) < GUIDED_MIN_MATCHES:
                     continue
                 m = m.astype(np.uint32)
@@ -201,22 +203,41 @@ def guided_match(
     return {"pairs_tried": len(pairs), "pairs_matched": n_pairs, "matches": n_matches}
 
 
-def _mutual_ratio(dist: np.ndarray, ratio: float) -> np.ndarray:
-    """(K, 2) index pairs that are mutual nearest neighbours in ``dist`` (inf = not allowed) and pass the ratio
-    test against the second-best candidate in both directions."""
-    if dist.shape[0] == 0 or dist.shape[1] == 0:
+def band_matches(
+    sims: np.ndarray, num: np.ndarray, scale_a: np.ndarray, scale_b: np.ndarray, max_px: float, ratio: float
+) -> np.ndarray:
+    """(K, 2) index pairs (i in image a, j in image b) matched inside the epipolar band: mutual nearest neighbours in
+    descriptor distance d = √(2 − 2·s) (``sims`` (Na, Nb): cosine similarities of unit descriptors) among the
+    pairs with ``num[i, j]·scale_a[i] ≤ max_px`` and ``num[i, j]·scale_b[j] ≤ max_px`` (``num``: |x_bᵀ E x_a|;
+    ``scale_a``: pixels per unit of it in image b for the point i of a, ``scale_b`` in image a), that pass the
+    ratio test d₁ < ``ratio``·d₂ against the second-best candidate inside the band in both directions.
+
+    Works on similarities (the distance is decreasing in s): one masked copy of the block and a few reductions
+    instead of a dense distance matrix and partial sorts. Equals the dense definition (tests/sfm/test_given.py)."""
+    na, nb = sims.shape
+    if na == 0 or nb == 0:
         return np.zeros((0, 2), np.int64)
-    ja = np.argmin(dist, axis=1)
-    ib = np.argmin(dist, axis=0)
-    ia = np.arange(dist.shape[0])
-    d1 = dist[ia, ja]
-    mutual = np.isfinite(d1) & (ib[ja] == ia)
+    band = (num * scale_a[:, None] <= max_px) & (num * scale_b[None, :] <= max_px)
+    s = np.where(band, sims, -np.inf)  # (Na, Nb)
+    ia = np.arange(na)
+    ja = np.argmax(s, axis=1)  # best of b for each point of a
+    ib = np.argmax(s, axis=0)  # best of a for each point of b
+    s1 = s[ia, ja]
+    keep = np.isfinite(s1) & (ib[ja] == ia)
+    cand = np.flatnonzero(keep)
+    if cand.size == 0:
+        return np.zeros((0, 2), np.int64)
+    rows = s[cand].copy()  # second best in a's row, among the mutual candidates only
+    rows[np.arange(cand.size), ja[cand]] = -np.inf
+    cols = s[:, ja[cand]].T.copy()  # (K, Na) second best in b's column
+    cols[np.arange(cand.size), cand] = -np.inf
+    second_row = rows.max(axis=1) if nb >= 2 else np.full(cand.size, -np.inf)
+    second_col = cols.max(axis=1) if na >= 2 else np.full(cand.size, -np.inf)
 
-    def second(d: np.ndarray) -> np.ndarray:
-        """Second-smallest value per row."""
-        return np.partition(d, 1, axis=1)[:, 1] if d.shape[1] >= 2 else np.full(d.shape[0], np.inf)
+    def dist(v: np.ndarray) -> np.ndarray:
+        return np.sqrt(np.maximum(2.0 - 2.0 * v, 0.0))  # -inf → inf
 
-    ok_a = d1 < ratio * second(dist)
-    ok_b = d1 < ratio * second(dist.T)[ja]
-    keep = mutual & ok_a & ok_b
-    return np.stack([ia[keep], ja[keep]], 1)
+    d1 = dist(s1[cand])
+    ok = (d1 < ratio * dist(second_row)) & (d1 < ratio * dist(second_col))
+    cand = cand[ok]
+    return np.stack([cand, ja[cand]], 1)
