@@ -1,0 +1,127 @@
+"""Report a run of the workflow's `all` target (a finished one, or one under way): the time of every stage and of
+every method, the schedule on 1, 2 and 8 cores simulated from the per-job times (bench/schedule.py), whether each
+training run ended within 0.3 dB of the best held-out PSNR it reached, and the tables. Writes docs/suite.md.
+
+Per-job times are Snakemake's benchmark files (``DIR/benchmarks/<rule>/<name>.tsv``): ``wall s`` as measured and
+``CPU s`` (CPU seconds per thread: what the job takes alone, when other work shared the cores during the run).
+
+Run: ``.venv/bin/python bench/suite_report.py --directory DIR [--config config/config.yaml] [--out docs/suite.md]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+import yaml
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from bench._report import machine, table  # noqa: E402
+from bench.schedule import jobs_of, simulate  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[1]
+TOLERANCE_DB = 0.3
+
+
+def job_time(directory: Path, name: str, threads: int) -> tuple[float, float] | None:
+    """(wall s, CPU s per thread) of one job from its benchmark file, or None when it has not run."""
+    p = directory / "benchmarks" / f"{name}.tsv"
+    if not p.exists():
+        return None
+    row = list(csv.DictReader(p.open(), delimiter="\t"))[-1]
+    return float(row["s"]), float(row["cpu_time"]) / max(threads, 1)
+
+
+def curve(directory: Path, scene: str, bins: int, run: str) -> list[tuple[int, float]]:
+    """(step, held-out novel-view PSNR) of a finished run's train_log.csv ([] when absent)."""
+    p = directory / "results" / scene / f"b{bins}" / run / "train_log.csv"
+    if not p.exists():
+        return []
+    return [(int(r["step"]), float(r["psnr_novel"])) for r in csv.DictReader(p.open()) if r.get("psnr_novel")]
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--directory", type=Path, required=True, help="the workflow directory of the run")
+    ap.add_argument("--config", type=Path, default=REPO / "config" / "config.yaml")
+    ap.add_argument("--out", type=Path, default=REPO / "docs" / "suite.md")
+    args = ap.parse_args()
+    cfg = yaml.safe_load(args.config.read_text())
+    jobs = jobs_of(cfg)
+    times = {j: job_time(args.directory, jobs[j][0], jobs[j][2]) for j in jobs}
+    done = {j: t for j, t in times.items() if t is not None}
+    missing = sorted(j for j in jobs if j not in done)
+
+    # time per stage (rule)
+    by_rule: dict[str, list[tuple[float, float]]] = defaultdict(list)
+    for j, t in done.items():
+        by_rule[jobs[j][0].split("/", 1)[0]].append(t)
+    stage_rows = [[rule, len(ts), f"{sum(w for w, _ in ts) / 60:.1f}", f"{sum(c for _, c in ts) / 60:.1f}",
+                   f"{sum(c for _, c in ts) / len(ts):.0f}"]
+                  for rule, ts in sorted(by_rule.items(), key=lambda kv: -sum(c for _, c in kv[1]))]  # fmt: skip
+
+    # time and plateau check per method
+    bins_default = int(cfg.get("edi", {}).get("bins", [4])[0])
+    per_run: dict[str, list[tuple[float, float, float, float]]] = defaultdict(list)
+    for j, t in done.items():
+        if not j.startswith("train:"):
+            continue
+        _, scene, run = j.split(":", 2)
+        bins = int(cfg["runs"][run].get("bins", bins_default))
+        c = curve(args.directory, scene, bins, run)
+        if c:
+            best = max(p for _, p in c)
+            per_run[run].append((t[0], t[1], c[-1][1], best - c[-1][1]))
+    run_rows = []
+    for run, vals in sorted(per_run.items(), key=lambda kv: -sum(v[1] for v in kv[1])):
+        opts = cfg["runs"][run].get("options", {})
+        worst = max(v[3] for v in vals)
+        run_rows.append([run, cfg["runs"][run]["method"], opts.get("steps", "default"), len(vals),
+                         f"{sum(v[1] for v in vals) / len(vals):.0f}", f"{sum(v[0] for v in vals) / len(vals):.0f}",
+                         f"{sum(v[2] for v in vals) / len(vals):.2f}", f"{worst:.2f}",
+                         "yes" if worst <= TOLERANCE_DB else "**no**"])  # fmt: skip
+
+    md = [
+        "# The default suite, measured\n",
+        f"Written by `bench/suite_report.py` from the run in `{args.directory}` (config `{args.config.name}`); "
+        f"{machine()}. {len(done)} of {len(jobs)} jobs have run"
+        + (
+            f"; not yet: {len(missing)} ({', '.join(missing[:6])}{', …' if len(missing) > 6 else ''})."
+            if missing
+            else "."
+        ),  # fmt: skip
+        "",
+        "## Time per stage\n",
+        "`CPU s` is CPU seconds per thread: the time a job takes when it has its cores to itself (the run shared the "
+        "machine with other work, so its wall times are upper bounds).\n",
+        table(["stage", "jobs", "wall min", "CPU min", "CPU s per job"], stage_rows),
+        "",
+        "## Training runs\n",
+        f"Mean over the scenes run so far. `within {TOLERANCE_DB} dB`: the final held-out novel-view PSNR is within "
+        f"{TOLERANCE_DB} dB of the best the run reached (`gap`: the largest shortfall over the scenes). A run that "
+        "stops part-way through a longer schedule is checked against that schedule's own curve in docs/results.md "
+        '("Training budgets").\n',
+        table(
+            ["run", "method", "steps", "scenes", "CPU s", "wall s", "PSNR", "gap", f"within {TOLERANCE_DB} dB"],
+            run_rows,
+        ),  # fmt: skip
+        "",
+    ]
+    if not missing:
+        cpu_times = {j: t[1] for j, t in done.items()}
+        sched = [[c, f"{simulate(jobs, cpu_times, c) / 3600:.2f}"] for c in (1, 2, 8)]
+        md += ["## Schedule\n", "`snakemake --cores N all` simulated from the per-job CPU times (bench/schedule.py: a "
+               "job starts when its inputs exist and its threads are free, longest remaining path first).\n",
+               table(["cores", "hours"], sched), ""]  # fmt: skip
+    tables = args.directory / "results" / "tables" / "tables.md"
+    if tables.exists():
+        md += ["## Tables\n", tables.read_text()]
+    args.out.write_text("\n".join(md) + "\n")
+    print(f"wrote {args.out}: {len(done)} of {len(jobs)} jobs")
+
+
+if __name__ == "__main__":
+    main()
