@@ -19,6 +19,7 @@ from eigs.render.field import FieldTensors, render_image
 from eigs.train.config import TrainConfig
 from eigs.train.data import load_train_data
 from eigs.train.field_config import FIELD_METHODS
+from eigs.train.field_factors import vm_dims
 from eigs.train.field_loop import FieldTrainer, field_held_out_psnr, train_field
 from eigs.train.field_methods import FIELD_REGISTRY
 from eigs.train.loop import partial_dir_of
@@ -81,14 +82,20 @@ def test_killed_run_resumes_to_the_same_parameters(data, tmp_path):
 
 def _resume_check(data, tmp_path):
     # growth at steps 15 and 45, occupancy refreshed every 10: both before and after the stop at 30
+    # the grid+vm field: the VM colour factors grow, checkpoint and resume with the grid
     cfg = _cfg("deblur-nerf", steps=60, checkpoint_every=20,
-               method_options={"grow_at": [0.25, 0.75], "occupancy_every": 10, "occupancy_start": 5})  # fmt: skip
+               method_options={"grow_at": [0.25, 0.75], "occupancy_every": 10, "occupancy_start": 5,
+                               "field": "grid+vm", "vm_voxels_start": 20**3, "vm_voxels_final": 48**3})  # fmt: skip
     full = train_field(data, cfg, tmp_path / "full")
     part = train_field(data, cfg, tmp_path / "resumed", stop_after=30)
     assert len(part.rows) < len(full.rows)
     resumed = train_field(data, cfg, tmp_path / "resumed")
     torch.testing.assert_close(resumed.model.grid, full.model.grid, rtol=0, atol=0)
     torch.testing.assert_close(resumed.model.occupancy, full.model.occupancy, rtol=0, atol=0)
+    assert full.model.vm is not None and resumed.model.vm is not None
+    assert full.model.vm.dims == resumed.model.vm.dims == vm_dims(full.model.extent, 48**3)  # grown
+    for p, q in zip(resumed.model.vm.leaves(), full.model.vm.leaves(), strict=True):
+        torch.testing.assert_close(p, q, rtol=0, atol=0)
     for p, q in zip(resumed.method.parameters(), full.method.parameters(), strict=True):
         torch.testing.assert_close(p, q, rtol=0, atol=0)
     a = list(csv.DictReader((tmp_path / "full" / "train_log.csv").open()))

@@ -1,11 +1,14 @@
-"""Render a voxel-grid radiance field (DVGO / Plenoxels style): camera rays, samples inside the field's box,
-empty space skipped by the occupancy grid, trilinear interpolation of density and colour (``grid_sample``), and
-the alpha-compositing quadrature of :func:`eigs.render.volume.composite`.
+"""Render a radiance field: camera rays, samples inside the field's box, empty space skipped by the occupancy grid,
+raw density and colour at the samples, and the alpha-compositing quadrature of :func:`eigs.render.volume.composite`.
 
 The field (``FieldTensors``) is the model file's content as tensors (:mod:`eigs.artifacts.field` documents the
-layout): ``grid`` (1, 1 + C, Z, Y, X) raw values, density σ = softplus(raw + ``density_shift``) per world unit,
+layout): a dense voxel grid (DVGO / Plenoxels style) ``grid`` (1, 1 + C, Z, Y, X) of raw values, trilinearly
+interpolated (``grid_sample``), optionally plus TensoRF's vector-matrix factors ``vm`` (:class:`VMFactors`: per
+component m the product of a plane over two axes and a line along the third, bilinear / linear interpolation; raw
+colour a linear basis (C, 3·Cc) of the colour components, raw density the sum of the density components, if any),
+whose raw values add to the grid's. Density σ = ``density_scale`` · softplus(raw + ``density_shift``) per world unit,
 colour sigmoid(raw colour); ``lo``, ``hi`` (3,) the box; ``occupancy`` (Z, Y, X) bool; ``warp`` (2, 3, K) the
-per-axis piecewise-linear map from world coordinates to the grid's normalised coordinates (a finer core, coarser
+per-axis piecewise-linear map from world coordinates to normalised coordinates in [0, 1] (a finer core, coarser
 shells; ``None``: linear over the box).
 """
 
@@ -23,11 +26,68 @@ from eigs.artifacts.field import FieldArrays
 from eigs.render.volume import TAU_MAX, composite, distortion, ray_aabb
 
 TRANS_MIN = 1e-4  # samples behind a transmittance this low are not composited
+# TensoRF's VM components: plane m spans axes PLANE_AXES[m] = (a, b) (a its width, b its height; x = 0, y = 1,
+# z = 2), line m runs along LINE_AXES[m]
+PLANE_AXES = ((0, 1), (0, 2), (1, 2))
+LINE_AXES = (2, 1, 0)
+
+
+@dataclass
+class VMFactors:
+    """TensoRF vector-matrix factors (tensors may be leaves being trained). ``density_planes[m]`` (1, Cd, R_b, R_a)
+    and ``density_lines[m]`` (1, Cd, R_c, 1) with (a, b) = ``PLANE_AXES[m]``, c = ``LINE_AXES[m]`` and R_x, R_y, R_z
+    the corner counts per axis (corners aligned with the box's faces); ``colour_planes`` / ``colour_lines`` the same
+    with Cc channels; ``basis`` (C, 3·Cc). The density lists may be empty (colour factors only)."""
+
+    density_planes: list[Tensor]
+    density_lines: list[Tensor]
+    colour_planes: list[Tensor]
+    colour_lines: list[Tensor]
+    basis: Tensor
+
+    def leaves(self) -> list[Tensor]:
+        return [*self.density_planes, *self.density_lines, *self.colour_planes, *self.colour_lines, self.basis]
+
+    @property
+    def dims(self) -> tuple[int, int, int]:
+        """(R_x, R_y, R_z) corner counts."""
+        r = [0, 0, 0]
+        for m, c in enumerate(LINE_AXES):
+            r[c] = int(self.colour_lines[m].shape[2])
+        return r[0], r[1], r[2]
+
+
+def _vm_components(planes: list[Tensor], lines: list[Tensor], pg: list[Tensor], lg: list[Tensor]) -> list[Tensor]:
+    """Per component m the product plane_m · line_m (Ch, N) at the sample grids ``pg[m]``, ``lg[m]`` (1, 1, N, 2)."""
+    out = []
+    for m in range(3):
+        p = F.grid_sample(planes[m], pg[m], mode="bilinear", padding_mode="border", align_corners=True)
+        q = F.grid_sample(lines[m], lg[m], mode="bilinear", padding_mode="border", align_corners=True)
+        out.append((p * q).reshape(p.shape[1], -1))
+    return out
+
+
+def vm_query(vm: VMFactors, u: Tensor, density_only: bool = False) -> Tensor:
+    """Raw values (N, 1 + C) (or (N, 1): the density only) of the VM factors at normalised coordinates ``u`` (N, 3)
+    in [0, 1]: raw density Σ_m Σ_k P_m[k](u_a, u_b) L_m[k](u_c), raw colour ``basis`` · concat_m(P_m ⊙ L_m)."""
+    v = u * 2.0 - 1.0
+    n = v.shape[0]
+    pg = [torch.stack([v[:, a], v[:, b]], dim=-1).reshape(1, 1, n, 2) for a, b in PLANE_AXES]
+    lg = [torch.stack([torch.zeros_like(v[:, c]), v[:, c]], dim=-1).reshape(1, 1, n, 2) for c in LINE_AXES]
+    if vm.density_planes:
+        dens = torch.cat(_vm_components(vm.density_planes, vm.density_lines, pg, lg), dim=0).sum(dim=0)
+    else:  # colour factors only
+        dens = v.new_zeros(n)
+    if density_only:
+        return dens.unsqueeze(-1)
+    feats = torch.cat(_vm_components(vm.colour_planes, vm.colour_lines, pg, lg), dim=0)  # (3·Cc, N)
+    return torch.cat([dens.unsqueeze(-1), (vm.basis @ feats).T], dim=-1)
 
 
 @dataclass
 class FieldTensors:
-    """A field ready to render (``grid`` may be a leaf being trained)."""
+    """A field ready to render (``grid`` and the ``vm`` factors may be leaves being trained): raw values from the grid,
+    plus the VM factors' when there are any."""
 
     grid: Tensor
     lo: Tensor
@@ -37,11 +97,25 @@ class FieldTensors:
     n_samples: int
     near: float
     warp: np.ndarray | None = None  # (2, 3, K) knots: world (warp[0]) and normalised in [0, 1] (warp[1]) per axis
+    vm: VMFactors | None = None
+    density_scale: float = 1.0
 
     @classmethod
     def from_arrays(cls, f: FieldArrays, device: torch.device) -> FieldTensors:
+        def t(a: np.ndarray) -> Tensor:
+            return torch.tensor(a, dtype=torch.float32, device=device)
+
+        vm = None
+        if f.vm is not None:
+            vm = VMFactors(
+                density_planes=[t(p).unsqueeze(0) for p in f.vm.density_planes],
+                density_lines=[t(q)[None, :, :, None] for q in f.vm.density_lines],
+                colour_planes=[t(p).unsqueeze(0) for p in f.vm.colour_planes],
+                colour_lines=[t(q)[None, :, :, None] for q in f.vm.colour_lines],
+                basis=t(f.vm.basis),
+            )
         return cls(
-            grid=torch.tensor(f.grid, dtype=torch.float32, device=device).unsqueeze(0),
+            grid=t(f.grid).unsqueeze(0),
             lo=torch.tensor(f.lo, dtype=torch.float32, device=device),
             hi=torch.tensor(f.hi, dtype=torch.float32, device=device),
             occupancy=torch.tensor(f.occupancy, dtype=torch.bool, device=device),
@@ -49,6 +123,8 @@ class FieldTensors:
             n_samples=int(f.n_samples),
             near=float(f.near),
             warp=None if f.warp is None else np.asarray(f.warp, np.float64),
+            vm=vm,
+            density_scale=float(f.density_scale),
         )
 
     @property
@@ -57,7 +133,12 @@ class FieldTensors:
 
     @property
     def n_voxels(self) -> int:
+        """Voxel corners of the grid."""
         return int(np.prod(self.grid.shape[2:]))
+
+    @property
+    def device(self) -> torch.device:
+        return self.lo.device
 
 
 def pixel_rays(c2w: Tensor, K: Tensor, px: Tensor, py: Tensor) -> tuple[Tensor, Tensor]:
@@ -101,17 +182,20 @@ def warp_coords(field: FieldTensors, pts: Tensor) -> Tensor:
 
 
 def query(field: FieldTensors, pts: Tensor, density_only: bool = False) -> Tensor:
-    """Raw grid values (N, 1 + C) (or (N, 1): the density only) at world points ``pts`` (N, 3) by trilinear
-    interpolation in the warped coordinates (border-clamped)."""
+    """Raw values (N, 1 + C) (or (N, 1): the density only) at world points ``pts`` (N, 3): trilinear interpolation of
+    the grid, or the VM factors (:func:`vm_query`), in the warped coordinates (border-clamped)."""
     return query_warped(field, warp_coords(field, pts), density_only)
 
 
 def query_warped(field: FieldTensors, u: Tensor, density_only: bool = False) -> Tensor:
     """:func:`query` at normalised grid coordinates ``u`` (N, 3) in [0, 1] (:func:`warp_coords` of the points)."""
     grid = field.grid[:, :1] if density_only else field.grid
-    u = u * 2.0 - 1.0
-    out = F.grid_sample(grid, u.reshape(1, 1, 1, -1, 3), mode="bilinear", padding_mode="border", align_corners=True)
-    return out.reshape(grid.shape[1], -1).T
+    g = u * 2.0 - 1.0
+    out = F.grid_sample(grid, g.reshape(1, 1, 1, -1, 3), mode="bilinear", padding_mode="border", align_corners=True)
+    out = out.reshape(grid.shape[1], -1).T
+    if field.vm is None or (density_only and not field.vm.density_planes):
+        return out
+    return out + vm_query(field.vm, u, density_only)
 
 
 def occupied(field: FieldTensors, pts: Tensor) -> Tensor:
@@ -190,7 +274,7 @@ def render_rays(
         with torch.no_grad():
             slot = (torch.cumsum(keep, dim=1) - 1)[rows, cols]
             width = int(slot.max()) + 1
-            sig = F.softplus(at(rows, cols, density_only=True)[:, 0] + field.density_shift)
+            sig = F.softplus(at(rows, cols, density_only=True)[:, 0] + field.density_shift) * field.density_scale
             tau = (sig * delta[rows, 0]).clamp(0.0, TAU_MAX)
             packed = torch.zeros((n_rays, width), dtype=tau.dtype, device=tau.device).index_put((rows, slot), tau)
             excl = torch.cumsum(packed, dim=1) - packed
@@ -200,7 +284,7 @@ def render_rays(
         slot = rows
     width = int(slot.max()) + 1 if slot.numel() else 1
     raw = at(rows, cols)  # (N, 1 + C)
-    sig = F.softplus(raw[:, 0] + field.density_shift)
+    sig = F.softplus(raw[:, 0] + field.density_shift) * field.density_scale
     col = torch.sigmoid(raw[:, 1:])
     sigmas = raw.new_zeros((n_rays, width)).index_put((rows, slot), sig)
     colours = raw.new_zeros((n_rays, width, c)).index_put((rows, slot), col)

@@ -19,8 +19,13 @@ FIELD_METHODS = frozenset({"nerf", "deblur-nerf", "edi-nerf", "e2nerf"})
 
 @dataclass(frozen=True)
 class FieldOptions:
-    """Every option of the voxel-grid field and its training, with its default."""
+    """Every option of the radiance field and its training, with its default."""
 
+    # the representation: "grid" (a dense voxel grid of density and colour, DVGO / Plenoxels style) or "grid+vm" (the
+    # grid plus TensoRF vector-matrix colour factors, the vm_* options, whose raw colour adds to the grid's: colour
+    # detail finer than its voxels). Measured on the still chair (docs/training.md): grid+vm +0.5 dB at step 300 but
+    # 3.7× the CPU per step, so the grid is the default
+    field: str = "grid"
     batch_rays: int = 4096  # rays per step (e2nerf / deblur-nerf: rays rendered, shared among latents / kernel)
     n_samples: int = 128  # samples per ray inside the box at the final grid (fewer on coarser grids, ∝ resolution)
     near: float = 0.3  # nearest distance sampled (canonical frame: RMS camera radius 1; no floaters at the lens)
@@ -45,6 +50,10 @@ class FieldOptions:
     # one sample interval (DVGO's alpha_init); the interval is the box diagonal / the samples per ray on the first
     # grid (the longest there is: a fresh voxel stays below occupancy_weight on every grid)
     alpha_init: float = 1e-3
+    # σ = density_scale · softplus(raw + shift) (DVGO measures density per voxel, TensoRF scales it by 25): Adam moves
+    # raw by ~lr per step, and an opaque sample needs σδ ≈ 3, i.e. σ ≈ 100 per world unit at δ = 0.03; unscaled,
+    # raw must climb to ~100 (~1000 steps at lr 0.1)
+    density_scale: float = 100.0
     # start from the SfM points (init.ply, as the Gaussian methods): voxels next to a point get the points' mean
     # colour and a density of α = 0.5 over one voxel (not in DVGO / NeRF: it saves the CPU the geometry search)
     init_from_points: bool = True
@@ -63,7 +72,17 @@ class FieldOptions:
     occupancy_every: int = 50
     occupancy_start: int = 20
     occupancy_weight: float = 2e-3
-
+    # the VM colour factors of "grid+vm": per axis pair a plane, along the third axis a line, with the corner counts
+    # of a dense grid of vm_voxels_* voxels over the box (growing from start to final at grow_at, as the grid),
+    # vm_colour_channels channels each; raw colour += basis (C, 3 · channels) · the plane-line products; the factors
+    # start at vm_init_scale · N(0, 1), the basis as nn.Linear's weight
+    vm_voxels_start: int = 128**3
+    vm_voxels_final: int = 300**3
+    vm_colour_channels: int = 16
+    vm_init_scale: float = 0.1
+    lr_factors: float = 0.02  # Adam on the factors and the basis (TensoRF), decayed as lr_grid by lr_decay
+    lr_basis: float = 1e-3
+    vm_tv_colour: float = 0.0  # total variation of the colour factors (mean squared neighbour differences, summed)
 
 @dataclass(frozen=True)
 class DeblurNerfOptions:

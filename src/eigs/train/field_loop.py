@@ -31,7 +31,7 @@ from eigs.render.field import render_image
 from eigs.train.config import TrainConfig
 from eigs.train.data import TrainData
 from eigs.train.field_methods import FieldMethod, make_field_method
-from eigs.train.field_model import FieldModel, field_box, lr_at, voxel_schedule
+from eigs.train.field_model import FieldModel, field_box, lr_factor, voxel_schedule
 from eigs.train.loop import complete_run, log_csv, resume_from_partial, run_steps
 from eigs.util.atomic import atomic_path
 
@@ -80,6 +80,7 @@ class FieldTrainer:
         rgb = rgb.mean(axis=1, keepdims=True) if data.channels == 1 else rgb
         self.model = FieldModel(lo, hi, data.channels, self.opts, device, points=init.means, colours=rgb)
         self.schedule = dict(voxel_schedule(self.opts, cfg.steps)[1:])
+        self.vm_schedule = dict(voxel_schedule(self.opts, cfg.steps, vm=True)[1:])
         self.gen = torch.Generator().manual_seed(cfg.seed)
         self.grid_opt = self._grid_optimizer()
         params = self.method.parameters()
@@ -93,7 +94,7 @@ class FieldTrainer:
         self._last: dict[str, float] = {}
 
     def _grid_optimizer(self) -> torch.optim.Adam:
-        return torch.optim.Adam([self.model.grid], lr=self.opts.lr_grid, eps=1e-15)
+        return torch.optim.Adam(self.model.param_groups(), eps=1e-15)
 
     # ------------------------------------------------------------------ checkpoints
     def state_dict(self) -> dict:
@@ -147,12 +148,12 @@ class FieldTrainer:
         """Run step ``self.step``; False when it was skipped (non-finite loss or gradient)."""
         o, step = self.opts, self.step
         if step in self.schedule:
-            self.model.grow(self.schedule[step])
+            self.model.grow(self.schedule[step], self.vm_schedule.get(step))
             self.grid_opt = self._grid_optimizer()
         if step >= o.occupancy_start and (step - o.occupancy_start) % o.occupancy_every == 0:
             self.occupied = self.model.update_occupancy()
         for group in self.grid_opt.param_groups:
-            group["lr"] = lr_at(o, step, self.cfg.steps)
+            group["lr"] = group["base_lr"] * lr_factor(o, step, self.cfg.steps)
         out = self.method.step(self.model, step, self.gen)
         loss, terms = out.loss, dict(out.terms)
         dist = self.method.take_distortion()
@@ -165,11 +166,9 @@ class FieldTrainer:
         ok = bool(torch.isfinite(loss))
         if ok:
             loss.backward()
-            grads = [p.grad for p in [self.model.grid, *self.method.parameters()] if p.grad is not None]
+            grads = [p.grad for p in [*self.model.leaves(), *self.method.parameters()] if p.grad is not None]
             ok = all(bool(torch.isfinite(g).all()) for g in grads)
-        if ok and (o.tv_density > 0 or o.tv_colour > 0):  # total variation: its gradient added in place
-            if self.model.grid.grad is None:
-                self.model.grid.grad = torch.zeros_like(self.model.grid)
+        if ok and max(o.tv_density, o.tv_colour, o.vm_tv_colour) > 0:  # total variation: gradient added in place
             terms["tv"] = self.model.add_total_variation_grad(o.tv_density, o.tv_colour)
             loss = loss.detach() + terms["tv"]
         self.step += 1
@@ -202,8 +201,8 @@ def train_field(
     tr = FieldTrainer(data, cfg, device)
     ckpt = resume_from_partial(tr, run_dir)
     m = tr.model
-    log.info("%s: %d steps, box %s .. %s, grid %s, device %s", cfg.method, cfg.steps, np.round(m.lo_np, 3),
-             np.round(m.hi_np, 3), tuple(m.grid.shape[2:]), device)  # fmt: skip
+    log.info("%s: %d steps, box %s .. %s, %s field %s, device %s", cfg.method, cfg.steps, np.round(m.lo_np, 3),
+             np.round(m.hi_np, 3), tr.opts.field, tuple(m.shape()), device)  # fmt: skip
     stopped = run_steps(
         tr, cfg, ckpt, run_dir, stop_after,
         size=lambda: {"n_voxels": tr.model.n_voxels, "occupied": round(tr.occupied, 4)},
@@ -232,7 +231,9 @@ def write_field_run(tr: FieldTrainer, run_dir: Path, inputs: dict[str, str]) -> 
         "train_seconds": round(tr.wall, 3),
         "skipped_steps": tr.skipped,
         "n_voxels": tr.model.n_voxels,
-        "grid_shape": list(tr.model.grid.shape[2:]),
+        "field": tr.opts.field,
+        "grid_shape": tr.model.shape(),
+        "vm_corners": None if tr.model.vm is None else list(tr.model.vm.dims),
         "occupied": tr.occupied,
         "box": [tr.model.lo_np.tolist(), tr.model.hi_np.tolist()],
         "final": tr.rows[-1] if tr.rows else {},

@@ -70,6 +70,11 @@ def _check_field_options(o: FieldOptions, where: str) -> None:
         (min(o.tv_density, o.tv_colour, o.distortion, o.near) >= 0, "tv weights, distortion and near must be >= 0"),
         (o.occupancy_every >= 1 and o.occupancy_start >= 0, "occupancy_every >= 1, occupancy_start >= 0"),
         (o.core_ratio >= 1 and o.core_radius > 0, "core_ratio must be >= 1 and core_radius > 0"),
+        (o.field in ("grid", "grid+vm"), f"field must be 'grid' or 'grid+vm', got {o.field!r}"),
+        (8 <= o.vm_voxels_start <= o.vm_voxels_final, "need 8 <= vm_voxels_start <= vm_voxels_final"),
+        (o.vm_colour_channels >= 1 and o.vm_init_scale > 0 and o.density_scale > 0,
+         "vm_colour_channels >= 1, vm_init_scale and density_scale > 0"),
+        (min(o.lr_factors, o.lr_basis, o.vm_tv_colour) >= 0, "lr_factors, lr_basis and vm_tv_colour must be >= 0"),
     ]
     for ok, msg in checks:
         if not ok:

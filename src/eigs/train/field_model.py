@@ -16,8 +16,18 @@ from torch import Tensor
 
 from eigs.artifacts.field import FieldArrays
 from eigs.errors import EigsError
-from eigs.render.field import FieldTensors
+from eigs.render.field import FieldTensors, VMFactors
 from eigs.train.field_config import FieldOptions
+from eigs.train.field_factors import (
+    grid_shape,
+    grow_vm,
+    make_vm,
+    tv_grad_,
+    vm_arrays,
+    vm_dims,
+    vm_from_leaves,
+    vm_tv_grad_,
+)
 
 
 def field_box(
@@ -90,25 +100,20 @@ def warp_np(warp: np.ndarray | None, lo: np.ndarray, hi: np.ndarray, points: np.
     return np.stack([np.interp(p[:, a], warp[0, a], warp[1, a]) for a in range(3)], axis=1)
 
 
-def grid_shape(extent: np.ndarray, voxels: int) -> tuple[int, int, int]:
-    """(Z, Y, X) corner counts for about ``voxels`` cubic voxels over a box of ``extent`` (3,) (each ≥ 2)."""
-    ext = np.asarray(extent, np.float64)
-    size = (float(np.prod(ext)) / max(voxels, 1)) ** (1.0 / 3.0)
-    n = np.maximum(np.round(ext / size).astype(int) + 1, 2)
-    return int(n[2]), int(n[1]), int(n[0])
-
-
 def grid_voxels(extent: np.ndarray, voxels: int) -> int:
     """Corner count of the grid :func:`grid_shape` gives for ``voxels``."""
     return int(np.prod(grid_shape(extent, voxels)))
 
 
-def voxel_schedule(opts: FieldOptions, steps: int) -> list[tuple[int, int]]:
-    """(step, voxels) of every growth: voxels_start at step 0, then geometric steps to voxels_final."""
+def voxel_schedule(opts: FieldOptions, steps: int, vm: bool = False) -> list[tuple[int, int]]:
+    """(step, voxels) of every growth: the start count at step 0, then geometric steps to the final count
+    (``voxels_start`` .. ``voxels_final``; with ``vm`` those of the VM factors, ``vm_voxels_start`` ..
+    ``vm_voxels_final``)."""
     k = len(opts.grow_at)
-    out = [(0, opts.voxels_start)]
+    start, final = (opts.vm_voxels_start, opts.vm_voxels_final) if vm else (opts.voxels_start, opts.voxels_final)
+    out = [(0, start)]
     for i, frac in enumerate(opts.grow_at, start=1):
-        v = opts.voxels_start * (opts.voxels_final / opts.voxels_start) ** (i / k)
+        v = start * (final / start) ** (i / k)
         out.append((max(int(frac * steps), 1), int(round(v))))
     return out
 
@@ -140,9 +145,15 @@ class FieldModel:
         self.occupancy = torch.ones(shape, dtype=torch.bool, device=device)
         self.max_weight = torch.zeros(shape, device=device)  # per voxel, since the last occupancy update
         sigma0 = -math.log1p(-opts.alpha_init) / self.sample_interval()
-        self.density_shift = math.log(math.expm1(sigma0))  # softplus(0 + shift) = sigma0
+        self.density_scale = opts.density_scale
+        self.density_shift = math.log(math.expm1(sigma0 / self.density_scale))  # scale · softplus(0 + shift) = sigma0
         if opts.init_from_points and points is not None and colours is not None and len(points):
             self.seed_from_points(np.asarray(points, np.float64), np.asarray(colours, np.float64))
+        # "grid+vm": VM colour factors whose raw colour adds to the grid's (detail finer than its voxels)
+        self.vm: VMFactors | None = None
+        if opts.field == "grid+vm":
+            self.vm = make_vm(vm_dims(self.extent, opts.vm_voxels_start), 0, opts.vm_colour_channels, channels,
+                              opts.vm_init_scale, device)  # fmt: skip
 
     @torch.no_grad()
     def seed_from_points(self, points: np.ndarray, colours: np.ndarray) -> None:
@@ -165,7 +176,7 @@ class FieldModel:
         near = vol[0] > 0
         mean = (vol[1:] / vol[:1].clamp_min(1e-12)).clamp(0.02, 0.98)
         sigma = math.log(2.0) / self.voxel_size()
-        raw_density = math.log(math.expm1(sigma)) - self.density_shift
+        raw_density = math.log(math.expm1(sigma / self.density_scale)) - self.density_shift
         g = self.grid.detach().clone()
         g[0, 0][near] = raw_density
         logit = torch.log(mean / (1 - mean)).to(g.dtype)
@@ -194,13 +205,17 @@ class FieldModel:
     def tensors(self) -> FieldTensors:
         o = self.opts
         return FieldTensors(
-            self.grid, self.lo, self.hi, self.occupancy, self.density_shift, self.n_samples(), o.near, self.warp
+            self.grid, self.lo, self.hi, self.occupancy, self.density_shift, self.n_samples(), o.near, self.warp,
+            self.vm, self.density_scale,
         )
 
     # ------------------------------------------------------------------ growth and occupancy
     @torch.no_grad()
-    def grow(self, voxels: int) -> None:
-        """Resample the grid (trilinear, corners aligned) to about ``voxels`` voxels; occupancy follows (nearest)."""
+    def grow(self, voxels: int, vm_voxels: int | None = None) -> None:
+        """Resample the grid (trilinear, corners aligned) to about ``voxels`` voxels; occupancy follows (nearest);
+        the VM colour factors, if any, to the corner counts of ``vm_voxels``."""
+        if self.vm is not None and vm_voxels is not None:
+            self.vm = grow_vm(self.vm, vm_dims(self.extent, vm_voxels))
         shape = grid_shape(self.extent, voxels)
         new = F.interpolate(self.grid.detach(), size=shape, mode="trilinear", align_corners=True)
         occ = F.interpolate(self.occupancy[None, None].float(), size=shape, mode="nearest")[0, 0] > 0
@@ -241,26 +256,34 @@ class FieldModel:
     @torch.no_grad()
     def add_total_variation_grad(self, w_density: float, w_colour: float) -> float:
         """Add the gradient of ``w_density`` · TV(density) + ``w_colour`` · TV(colour) (:meth:`total_variation`'s
-        terms) to ``grid.grad`` in place, without autograd (three slab differences per axis instead of a graph
-        over the whole grid). Returns the weighted value. ``grid.grad`` must exist (after ``backward``)."""
-        g, grad = self.grid[0], self.grid.grad[0]  # type: ignore[index]
+        terms) to ``grid.grad`` in place (created when missing), without autograd (:func:`tv_grad_`). Returns the
+        weighted value."""
+        if self.grid.grad is None:
+            self.grid.grad = torch.zeros_like(self.grid)
+        g, grad = self.grid[0], self.grid.grad[0]
         total = 0.0
         for sl, w in ((slice(0, 1), w_density), (slice(1, None), w_colour)):
-            if w <= 0:
-                continue
-            x, gx = g[sl], grad[sl]
-            for d in (1, 2, 3):
-                n = x.shape[d]
-                if n < 2:
-                    continue
-                diff = x.narrow(d, 1, n - 1) - x.narrow(d, 0, n - 1)
-                scale = w / (3.0 * diff.numel())
-                flat = diff.reshape(-1)
-                total += scale * float(torch.dot(flat, flat))
-                diff.mul_(2.0 * scale)
-                gx.narrow(d, 1, n - 1).add_(diff)
-                gx.narrow(d, 0, n - 1).sub_(diff)
+            if w > 0:
+                total += tv_grad_(g[sl], grad[sl], w / 3.0, (1, 2, 3))
+        if self.vm is not None:
+            total += vm_tv_grad_(self.vm, 0.0, self.opts.vm_tv_colour)
         return total
+
+    def leaves(self) -> list[Tensor]:
+        return [self.grid, *(self.vm.leaves() if self.vm is not None else [])]
+
+    def param_groups(self) -> list[dict]:
+        """Adam groups: the grid at ``lr_grid``; VM colour factors at ``lr_factors``, their basis at ``lr_basis``
+        (``base_lr``: what the decay scales)."""
+        o = self.opts
+        groups = [{"params": [self.grid], "lr": o.lr_grid, "base_lr": o.lr_grid}]
+        if self.vm is not None:
+            groups += [{"params": self.vm.leaves()[:-1], "lr": o.lr_factors, "base_lr": o.lr_factors},
+                       {"params": [self.vm.basis], "lr": o.lr_basis, "base_lr": o.lr_basis}]  # fmt: skip
+        return groups
+
+    def shape(self) -> list[int]:
+        return list(self.grid.shape[2:])
 
     def to_arrays(self) -> FieldArrays:
         o = self.opts
@@ -270,16 +293,21 @@ class FieldModel:
             hi=self.hi_np.copy(),
             occupancy=self.occupancy.cpu().numpy().astype(bool),
             density_shift=float(self.density_shift),
+            density_scale=float(self.density_scale),
             n_samples=self.n_samples(),
             near=float(o.near),
             warp=None if self.warp is None else self.warp.copy(),
+            vm=None if self.vm is None else vm_arrays(self.vm),
         )
 
     def state_dict(self) -> dict:
+        vm = None if self.vm is None else [t.detach().cpu() for t in self.vm.leaves()]
         return {"grid": self.grid.detach().cpu(), "occupancy": self.occupancy.cpu(),
-                "max_weight": self.max_weight.cpu()}  # fmt: skip
+                "max_weight": self.max_weight.cpu(), "vm": vm}  # fmt: skip
 
     def load_state_dict(self, state: dict) -> None:
+        if state.get("vm") is not None:
+            self.vm = vm_from_leaves([t.to(self.device).requires_grad_(True) for t in state["vm"]], density=False)
         self.grid = state["grid"].to(self.device).requires_grad_(True)
         self.occupancy = state["occupancy"].to(self.device)
         self.max_weight = state["max_weight"].to(self.device)
@@ -287,5 +315,10 @@ class FieldModel:
 
 def lr_at(opts: FieldOptions, step: int, steps: int) -> float:
     """Exponential decay of the grid learning rate from ``lr_grid`` to ``lr_grid · lr_decay`` over the run."""
+    return opts.lr_grid * lr_factor(opts, step, steps)
+
+
+def lr_factor(opts: FieldOptions, step: int, steps: int) -> float:
+    """The decay factor of every field learning rate at ``step``: 1 at the start, ``lr_decay`` at the end."""
     t = min(max(step / max(steps, 1), 0.0), 1.0)
-    return opts.lr_grid * math.exp(math.log(max(opts.lr_decay, 1e-12)) * t)
+    return math.exp(math.log(max(opts.lr_decay, 1e-12)) * t)
