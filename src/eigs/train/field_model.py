@@ -1,6 +1,7 @@
 """The trainable voxel-grid radiance field: the box from the initial points, the warp (a finer core around the
-object), the grid (one leaf tensor of raw density and colour), coarse-to-fine growth, the occupancy mask, total
-variation, export to the model file.
+object), the grid (one leaf tensor of raw density and colour) and, for ``field: grid+vm``, VM colour factors
+(:mod:`eigs.train.field_factors`), coarse-to-fine growth, the occupancy mask, total variation, export to the model
+file.
 
 Shapes: ``grid`` (1, 1 + C, Z, Y, X) (x the last axis); the box [lo, hi] in world units of the canonical SfM frame.
 """
@@ -311,11 +312,6 @@ class FieldModel:
         self.grid = state["grid"].to(self.device).requires_grad_(True)
         self.occupancy = state["occupancy"].to(self.device)
         self.max_weight = state["max_weight"].to(self.device)
-
-
-def lr_at(opts: FieldOptions, step: int, steps: int) -> float:
-    """Exponential decay of the grid learning rate from ``lr_grid`` to ``lr_grid · lr_decay`` over the run."""
-    return opts.lr_grid * lr_factor(opts, step, steps)
 
 
 def lr_factor(opts: FieldOptions, step: int, steps: int) -> float:
