@@ -59,7 +59,8 @@ class FieldOptions:
     # colour and a density of α = 0.5 over one voxel (not in DVGO / NeRF: it saves the CPU the geometry search)
     init_from_points: bool = True
     lr_grid: float = 0.1  # Adam on the grid (DVGO), decayed exponentially to lr_grid · lr_decay at the end
-    lr_decay: float = 0.1
+    # measured on the still chair, 800 steps: novel view 28.34 dB at the end with 0.3, 27.88 with DVGO's 0.1
+    lr_decay: float = 0.3
     # total-variation weights on the raw grid (mean squared neighbour differences; Plenoxels' smoothness prior): 24
     # views do not determine a voxel grid, and without it the novel views fill with floaters (docs/training.md)
     tv_density: float = 1e-2
