@@ -257,6 +257,30 @@ def test_damaged_checkpoints_are_ignored_or_resume_finite(originals, fresh_param
         assert torch.isfinite(v).all()
 
 
+@pytest.mark.parametrize("damage_kind", ["renamed key", "wrong shape"])
+def test_checkpoint_with_damaged_adam_state_is_ignored(originals, fresh_params, tmp_path_factory, caplog, damage_kind):
+    """Regression (found by the fuzz test above): a flipped byte renamed an Adam moment's key in the pickle
+    ('exp_avg' → another name), the checkpoint loaded, and the first optimiser step after resuming raised KeyError.
+    The Adam state is now checked (its keys, and moments of the parameter's shape) before resuming."""
+    fname, raw = originals["checkpoint"]
+    state = torch.load(__import__("io").BytesIO(raw), weights_only=False)
+    entry = state["optimizer"]["state"][0]
+    if damage_kind == "renamed key":
+        entry["exp_avc"] = entry.pop("exp_avg")
+    else:
+        entry["exp_avg"] = entry["exp_avg"][:-1]
+        entry["exp_avg_sq"] = entry["exp_avg_sq"][:-1]
+    path = tmp_path_factory.mktemp("ckpt") / fname
+    torch.save(state, path)
+    tr = _fresh_trainer()
+    with caplog.at_level(logging.WARNING, logger="eigs.train.loop"):
+        assert not tr.load_checkpoint(path)
+    assert any(str(path) in r.getMessage() and "optimizer" in r.getMessage() for r in caplog.records), caplog.text
+    for k, v in fresh_params.items():
+        assert torch.equal(tr.model.params[k].detach(), v), k
+    tr.train_step()
+
+
 def test_ply_header_damage(originals, tmp_path_factory):
     """Each property of the header renamed in turn (same length, so the binary body still parses), and an odd
     number of f_rest properties: a one-line error or a valid cloud, as for any other damage."""

@@ -38,6 +38,7 @@ from eigs.util.progress import progress
 log = logging.getLogger(__name__)
 
 CHECKPOINT_VERSION = 1
+ADAM_STATE = ("step", "exp_avg", "exp_avg_sq")  # what torch.optim.Adam keeps per parameter (amsgrad off)
 LOG_COLUMNS = ("step", "wall_s", "loss", "n_gaussians", "psnr_novel", "psnr_blur")
 
 
@@ -163,8 +164,18 @@ class Trainer:
         opt = state.get("optimizer")
         if not isinstance(opt, dict) or not isinstance(opt.get("state"), dict):
             return "optimizer state missing"
-        for entry in opt["state"].values():
-            for key, t in (entry.items() if isinstance(entry, dict) else []):
+        shape_of = {}  # Adam state index → the shape its moments must have (the Gaussian parameters' groups)
+        for group in opt.get("param_groups", []) if isinstance(opt.get("param_groups"), list) else []:
+            if isinstance(group, dict) and group.get("name") in PARAM_NAMES and isinstance(group.get("params"), list):
+                shape_of.update({i: params[group["name"]].shape for i in group["params"]})
+        for index, entry in opt["state"].items():
+            if not isinstance(entry, dict) or any(not isinstance(entry.get(k), torch.Tensor) for k in ADAM_STATE):
+                return f"optimizer state {index} lacks {', '.join(ADAM_STATE)}"
+            if entry["exp_avg"].shape != entry["exp_avg_sq"].shape or (
+                index in shape_of and entry["exp_avg"].shape != shape_of[index]
+            ):
+                return f"optimizer moments {index} have shape {tuple(entry['exp_avg'].shape)}"
+            for key, t in entry.items():
                 if isinstance(t, torch.Tensor) and t.is_floating_point() and not bool(torch.isfinite(t).all()):
                     return f"optimizer {key} has NaN/Inf values"
         missing = [k for k in ("step", "strategy", "method", "rng", "torch_rng", "order", "rows", "wall", "bad",
