@@ -53,16 +53,21 @@ def jobs_of(cfg: dict) -> dict[str, tuple[str, list[str], int]]:
     return jobs
 
 
+def job_time(directory: Path, name: str, threads: int) -> tuple[float, float] | None:
+    """(wall s, CPU s per thread) of one job from its benchmark file, or None when it has not run."""
+    p = directory / "benchmarks" / f"{name}.tsv"
+    if not p.exists():
+        return None
+    row = list(csv.DictReader(p.open(), delimiter="\t"))[-1]
+    return float(row["s"]), float(row["cpu_time"]) / max(threads, 1)
+
+
 def seconds(
     directory: Path | None, name: str, estimates: dict[str, float], column: str = "s", threads: int = 1
 ) -> float:
-    if directory is not None:
-        p = directory / "benchmarks" / f"{name}.tsv"
-        if p.exists():
-            rows = list(csv.DictReader(p.open(), delimiter="\t"))
-            if column == "cpu_time":
-                return float(rows[-1]["cpu_time"]) / max(threads, 1)
-            return float(rows[-1]["s"])
+    measured = job_time(directory, name, threads) if directory is not None else None
+    if measured is not None:
+        return measured[1] if column == "cpu_time" else measured[0]
     rule, _, rest = name.partition("/")
     run = rest.rsplit("_", 1)[-1] if rule in ("train", "evaluate") else ""
     for key in (f"{rule}:{run}", rule):

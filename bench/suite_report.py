@@ -20,19 +20,10 @@ import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench._report import machine, table  # noqa: E402
-from bench.schedule import jobs_of, simulate  # noqa: E402
+from bench.schedule import job_time, jobs_of, simulate  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 TOLERANCE_DB = 0.3
-
-
-def job_time(directory: Path, name: str, threads: int) -> tuple[float, float] | None:
-    """(wall s, CPU s per thread) of one job from its benchmark file, or None when it has not run."""
-    p = directory / "benchmarks" / f"{name}.tsv"
-    if not p.exists():
-        return None
-    row = list(csv.DictReader(p.open(), delimiter="\t"))[-1]
-    return float(row["s"]), float(row["cpu_time"]) / max(threads, 1)
 
 
 def curve(directory: Path, scene: str, bins: int, run: str) -> list[tuple[int, float]]:

@@ -227,12 +227,11 @@ def band_matches(
     cand = np.flatnonzero(keep)
     if cand.size == 0:
         return np.zeros((0, 2), np.int64)
-    rows = s[cand].copy()  # second best in a's row, among the mutual candidates only
+    rows = s[cand]  # (K, Nb) a's rows of the mutual candidates (a copy): second best once the best is masked
     rows[np.arange(cand.size), ja[cand]] = -np.inf
-    cols = s[:, ja[cand]].T.copy()  # (K, Na) second best in b's column
+    cols = s[:, ja[cand]].T  # (K, Na) their columns in b (a copy), likewise
     cols[np.arange(cand.size), cand] = -np.inf
-    second_row = rows.max(axis=1) if nb >= 2 else np.full(cand.size, -np.inf)
-    second_col = cols.max(axis=1) if na >= 2 else np.full(cand.size, -np.inf)
+    second_row, second_col = rows.max(axis=1), cols.max(axis=1)  # -inf when the row or column has one entry
 
     def dist(v: np.ndarray) -> np.ndarray:
         return np.sqrt(np.maximum(2.0 - 2.0 * v, 0.0))  # -inf → inf
