@@ -16,6 +16,7 @@ from collections.abc import Sequence
 
 from eigs import __version__
 from eigs.errors import EigsError
+from eigs.util.memory import keep_freed_memory
 
 # subcommand name -> module path (in pipeline order). A subcommand is named for what it does and lives in the
 # package of its stage: ingest -> io (readers of outside formats), edi -> events, init -> sfm (it reads the SfM
@@ -73,6 +74,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",
         stream=sys.stderr,
     )
+    keep_freed_memory()  # a step's large temporaries reuse pages instead of faulting fresh ones (eigs.util.memory)
     try:
         if args.threads is not None:
             from eigs.util.threads import set_threads
