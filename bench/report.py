@@ -20,7 +20,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench._report import table  # noqa: E402
 
 # Sections in the order of the pipeline; a section missing from the run is left out.
-SECTIONS = ["ingest", "synth", "edi", "sfm", "rasterizer", "train-step", "train-step-methods", "metrics"]
+SECTIONS = ["ingest", "synth", "edi", "sfm", "rasterizer", "train-step", "train-step-methods", "train-step-malloc",
+            "metrics"]
 FIGURES = ["edi", "sfm", "rasterizer", "train", "skips"]  # docs/figures/bench_<name>.png
 TRAIN_STEPS_DEFAULT = 3000  # eigs.train.config.TrainConfig.steps; read from there when importable
 

@@ -5,14 +5,20 @@ Writes the "train-step" section of docs/benchmarks.md. Needs a built-in scene's 
 
 Run: ``.venv/bin/python bench/train.py [--results results/chair] [--bins 4] [--threads 2] [--quick] [--out DIR]``
 (``--quick``: 5k and 10k Gaussians, half and full image size, 8 repeats; ``--out DIR``: DIR/train-step.md,
-DIR/train-step-methods.md and their JSON instead of docs/benchmarks.md).
+DIR/train-step-methods.md, DIR/train-step-malloc.md and their JSON instead of docs/benchmarks.md).
+
+The script tunes malloc as ``eigs train`` does (:mod:`eigs.util.memory`); the ``train-step-malloc`` section times
+steps with and without that tuning, each in a process of its own.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import math
+import resource
 import statistics
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -21,11 +27,12 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench._report import add_out_argument, table, write_section  # noqa: E402
-from eigs.artifacts.gaussians import GaussianCloud  # noqa: E402
+from eigs.artifacts.gaussians import GaussianCloud, read_gaussian_ply  # noqa: E402
 from eigs.losses import photometric_loss  # noqa: E402
 from eigs.train.config import TrainConfig  # noqa: E402
 from eigs.train.data import load_train_data  # noqa: E402
 from eigs.train.loop import Trainer  # noqa: E402
+from eigs.util.memory import keep_freed_memory  # noqa: E402
 
 
 def resized_cloud(cloud: GaussianCloud, n: int, seed: int = 0) -> GaussianCloud:
@@ -135,6 +142,69 @@ def method_breakdown(tr: Trainer, repeats: int) -> dict[str, float]:
     return res
 
 
+PLUS = {"pose_prior": True, "ade_zero_last": True, "blur_target": "discrete", "blur_weights": "trapezoid",
+        "latent_weight": 0.5}  # the default suite's eigs+ (config/config.yaml)
+MALLOC_RUNS = (("3dgs", "3dgs", {}), ("e2gs", "e2gs", {}), ("eigs+", "eigs", PLUS))
+MALLOC_GAUSSIANS = 17_000  # the size the suite's multi-render runs end at (drums eigs+: 17,083 at step 1750)
+
+
+def step_cost(data, spec: dict) -> dict[str, float]:  # noqa: ANN001
+    """Child process: CPU ms and minor page faults per training step of ``spec`` (method, options, Gaussians,
+    tuned, steps) at one thread, without densification."""
+    if spec["tuned"]:
+        keep_freed_memory()
+    torch.set_num_threads(1)
+    cloud = read_gaussian_ply(spec["cloud"]) if spec["cloud"] else data.init
+    data.init = resized_cloud(cloud, spec["gaussians"])
+    cfg = TrainConfig.from_dict({"method": spec["method"], "densify": False, "method_options": spec["options"]})
+    tr = Trainer(data, cfg, torch.device("cpu"))
+    tr.warm_up()
+    for _ in range(3):
+        tr.train_step()
+    t, f = time.process_time(), resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+    for _ in range(spec["steps"]):
+        tr.train_step()
+    n = spec["steps"]
+    return {"ms": (time.process_time() - t) / n * 1e3,
+            "faults": (resource.getrusage(resource.RUSAGE_SELF).ru_minflt - f) / n}  # fmt: skip
+
+
+def malloc_section(args: argparse.Namespace) -> None:
+    """One-thread step cost with and without :func:`keep_freed_memory`, alternating processes, 2 rounds each."""
+    steps, rounds = (10, 1) if args.quick else (20, 2)
+    rows, records = [], []
+    for label, method, options in MALLOC_RUNS:
+        res: dict[bool, list[dict[str, float]]] = {False: [], True: []}
+        for _ in range(rounds):
+            for tuned in (False, True):
+                spec = {"method": method, "options": options, "gaussians": MALLOC_GAUSSIANS, "tuned": tuned,
+                        "steps": steps, "cloud": args.cloud}  # fmt: skip
+                cmd = [sys.executable, __file__, "--results", args.results, "--bins", str(args.bins),
+                       "--step-cost", json.dumps(spec)]  # fmt: skip
+                out = subprocess.run(cmd, capture_output=True, text=True, check=True).stdout
+                res[tuned].append(json.loads(out.strip().splitlines()[-1]))
+        ms = {k: min(r["ms"] for r in v) for k, v in res.items()}
+        faults = {k: statistics.median(r["faults"] for r in v) for k, v in res.items()}
+        rows.append([label, f"{ms[False]:.1f}", f"{ms[True]:.1f}", f"{ms[False] / ms[True]:.2f}×",
+                     f"{faults[False]:,.0f}", f"{faults[True]:,.0f}"])  # fmt: skip
+        records.append({"run": label, "ms_default": ms[False], "ms_tuned": ms[True], "faults_default": faults[False],
+                        "faults_tuned": faults[True]})  # fmt: skip
+        print(rows[-1], flush=True)
+    cloud = f"resampled from `{args.cloud}`" if args.cloud else "the init cloud resampled"
+    cols = ["run", "ms (glibc default)", "ms (tuned)", "speed-up", "faults (default)", "faults (tuned)"]
+    md = (
+        f"One training step at one thread (as the suite's jobs run), {MALLOC_GAUSSIANS:,} Gaussians, no "
+        f"densification, on `{Path(args.results).name}` ({cloud}): CPU ms per step (minimum over {rounds} "
+        f"process(es) of {steps} steps each) and minor page faults per step, with glibc's default malloc "
+        "thresholds and with `eigs.util.memory.keep_freed_memory` (what every `eigs` command now does). Default "
+        "thresholds hand a step's freed activations back to the system, so the next step faults them in again page "
+        "by page.\n\n"
+        + table(cols, rows) + "\n"
+    )
+    write_section("train-step-malloc", "Training step: malloc tuning", md, data={"runs": records}, out=args.out)
+    print(md)
+
+
 def size_sections(args: argparse.Namespace, r: Path, data, base: GaussianCloud) -> None:  # noqa: ANN001
     """The 3dgs step broken down by Gaussian count and by image size."""
     cfg = TrainConfig.from_dict({"method": "3dgs", "densify": False})
@@ -184,8 +254,20 @@ def main() -> None:
     ap.add_argument("--bins", type=int, default=4, help="the EDI artifact results/<scene>/b<B>/ to train on")
     ap.add_argument("--methods-only", action="store_true", help="only the per-method section")
     ap.add_argument("--quick", action="store_true", help="fewer Gaussian counts and sizes (see the module doc)")
+    ap.add_argument("--cloud", default="", help="malloc section: a trained run's model.ply to resample from")
+    ap.add_argument("--malloc-only", action="store_true", help="only the malloc section")
+    ap.add_argument("--step-cost", help=argparse.SUPPRESS)  # internal: the child process of malloc_section
     add_out_argument(ap)
     args = ap.parse_args()
+    if args.step_cost:
+        r = Path(args.results) / f"b{args.bins}"
+        data = load_train_data(Path(args.results) / "scene.h5", r / "edi.h5", r / "sfm", r / "init.ply")
+        print(json.dumps(step_cost(data, json.loads(args.step_cost))))
+        return
+    keep_freed_memory()  # as `eigs train` does
+    malloc_section(args)
+    if args.malloc_only:
+        return
     if args.quick:
         args.repeats = min(args.repeats, 8)
     torch.set_num_threads(args.threads)

@@ -61,8 +61,12 @@ rule bench_train:
         sfm=lambda wc: f"results/{bench_train_scene()}/b{edi_bins()[0]}/sfm",
         init=lambda wc: f"results/{bench_train_scene()}/b{edi_bins()[0]}/init.ply",
     output:
-        md=["results/bench/train-step.md", "results/bench/train-step-methods.md"],
-        json=["results/bench/train-step.json", "results/bench/train-step-methods.json"],
+        md=["results/bench/train-step.md", "results/bench/train-step-methods.md", "results/bench/train-step-malloc.md"],
+        json=[
+            "results/bench/train-step.json",
+            "results/bench/train-step-methods.json",
+            "results/bench/train-step-malloc.json",
+        ],
     params:
         script=os.path.join(BENCH_DIR, "train.py"),
         results=lambda wc, input: os.path.dirname(input.scene),
