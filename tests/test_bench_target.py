@@ -43,7 +43,8 @@ def test_bench_runs_every_script_once_and_writes_one_report(tmp_path, quick):
     assert proc.returncode == 0, proc.stderr[-2000:]
     out = outputs(proc.stdout)
     assert {o for o in out if re.fullmatch(r"results/bench/[\w-]+\.json", o)} == {
-        f"results/bench/{n}.json" for n in SCRIPTS | {"metrics", "train-step", "train-step-methods", "train-step-malloc"}
+        f"results/bench/{n}.json"
+        for n in SCRIPTS | {"metrics", "train-step", "train-step-methods", "train-step-malloc"}
     }
     doc = "results/bench/benchmarks.md" if quick else "docs/benchmarks.md"
     figures = "results/bench/figures" if quick else "docs/figures"

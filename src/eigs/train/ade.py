@@ -9,6 +9,12 @@ The pose encoding is the same for every Gaussian of a view, so its product with 
 per-view bias instead of concatenating it to each Gaussian's input: ``first_x(γ(x_j)) + first_pose(γ(P))`` equals
 the first layer on the concatenation exactly, and costs one (pose inputs × width) product per step instead of one
 per Gaussian.
+
+The layers run as one autograd Function, :class:`FusedMLP`, over blocks of ``CHUNK_ROWS`` Gaussians: bias and ReLU
+are applied in place on each block's activations while they are in cache, and the backward accumulates the weight
+gradients block by block. :meth:`ADE.forward_reference` is the same network through ``nn.Linear`` and
+``torch.relu`` (the reference the tests compare it with; equal up to float32 summation order, ~1e-6 relative).
+On the 2-core VM at 17k Gaussians, width 256, one thread: forward + backward 115 ms instead of 124–132 ms.
 """
 
 from __future__ import annotations
@@ -17,6 +23,8 @@ import math
 
 import torch
 from torch import Tensor, nn
+
+CHUNK_ROWS = 1024  # Gaussians per block of FusedMLP (1024–2048 measured fastest; 4096 and whole-array slower)
 
 
 def frequency_encoding(p: Tensor, n_freqs: int) -> Tensor:
@@ -31,6 +39,54 @@ def frequency_encoding(p: Tensor, n_freqs: int) -> Tensor:
 def pose_features(c2w: Tensor) -> Tensor:
     """(…, 4, 4) camera-to-world → (…, 9): translation, then the first two rotation columns."""
     return torch.cat([c2w[..., :3, 3], c2w[..., :3, 0], c2w[..., :3, 1]], dim=-1)
+
+
+class FusedMLP(torch.autograd.Function):
+    """``x`` (N, I) through linear layers ``(W_0, b_0, …, W_{L-1}, b_{L-1})`` (W_l: (out, in)) with ReLU between:
+    (N, out_{L-1}). The forward keeps every hidden activation (after ReLU) for the backward; ReLU's derivative is
+    read from them (an activation > 0 ⟺ its pre-activation > 0)."""
+
+    @staticmethod
+    def forward(ctx, x: Tensor, *params: Tensor) -> Tensor:  # noqa: ANN001
+        weights, biases = params[0::2], params[1::2]
+        n = x.shape[0]
+        acts = [x.new_empty(n, w.shape[0]) for w in weights[:-1]]  # (N, width) per hidden activation
+        out = x.new_empty(n, weights[-1].shape[0])
+        for s in range(0, n, CHUNK_ROWS):
+            h = x[s : s + CHUNK_ROWS]
+            for layer, (w, b) in enumerate(zip(weights, biases, strict=True)):
+                if layer < len(acts):
+                    h = torch.addmm(b, h, w.t(), out=acts[layer][s : s + CHUNK_ROWS]).relu_()
+                else:
+                    torch.addmm(b, h, w.t(), out=out[s : s + CHUNK_ROWS])
+        ctx.save_for_backward(x, *acts, *weights)
+        ctx.n_layers = len(weights)
+        return out
+
+    @staticmethod
+    def backward(ctx, v_out: Tensor) -> tuple[Tensor | None, ...]:  # noqa: ANN001
+        saved = ctx.saved_tensors
+        n_layers = ctx.n_layers
+        x, acts, weights = saved[0], saved[1:n_layers], saved[n_layers:]
+        inputs = (x, *acts)  # the input of each layer
+        v_w = [torch.zeros_like(w) for w in weights]
+        v_b = [w.new_zeros(w.shape[0]) for w in weights]
+        v_x = torch.empty_like(x) if ctx.needs_input_grad[0] else None
+        v_out = v_out.contiguous()
+        for s in range(0, x.shape[0], CHUNK_ROWS):
+            g = v_out[s : s + CHUNK_ROWS]  # gradient at the current layer's output
+            for layer in range(n_layers - 1, -1, -1):
+                a = inputs[layer][s : s + CHUNK_ROWS]
+                v_w[layer].addmm_(g.t(), a)
+                v_b[layer] += g.sum(dim=0)
+                if layer > 0:
+                    g = (g @ weights[layer]).mul_(a > 0)
+                elif v_x is not None:
+                    torch.mm(g, weights[0], out=v_x[s : s + CHUNK_ROWS])
+        grads: list[Tensor | None] = [v_x]
+        for w, b in zip(v_w, v_b, strict=True):
+            grads += [w, b]
+        return tuple(grads)
 
 
 class ADE(nn.Module):
@@ -76,6 +132,14 @@ class ADE(nn.Module):
     def forward(self, x: Tensor, pose_input: Tensor) -> Tensor:
         """``x`` (N, 3) centres (detached by the caller), ``pose_input`` from :meth:`encode_poses` →
         (N, n_moved, out_per_latent)."""
+        params: list[Tensor] = [self.first_x.weight, self.first_x.bias + self.first_pose(pose_input)]  # per-view bias
+        for layer in [*self.hidden, self.last]:
+            params += [layer.weight, layer.bias]
+        out = FusedMLP.apply(frequency_encoding(x, self.x_freqs), *params)
+        return out.reshape(x.shape[0], self.n_moved, self.out_per_latent)
+
+    def forward_reference(self, x: Tensor, pose_input: Tensor) -> Tensor:
+        """:meth:`forward` through ``nn.Linear`` and ``torch.relu`` (the tests' reference)."""
         h = self.first_x(frequency_encoding(x, self.x_freqs)) + self.first_pose(pose_input)  # per-view bias
         h = torch.relu(h)
         for layer in self.hidden:
