@@ -76,3 +76,14 @@ def test_function_gradients_against_finite_differences(monkeypatch):
         params += [torch.randn(out_dim, in_dim, dtype=torch.float64, requires_grad=True),
                    torch.randn(out_dim, dtype=torch.float64, requires_grad=True)]  # fmt: skip
     assert torch.autograd.gradcheck(lambda *a: FusedMLP.apply(*a), (x, *params), eps=1e-6, atol=1e-6)
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA GPU (absent on CI machines); runs on GPU hosts")
+def test_fused_on_cuda_equals_cpu_reference():
+    """On a GPU the network runs in one block; same network, same answer as the CPU reference (float64)."""
+    net, x, pose, v = make(3, 64, 2500, torch.float64)
+    out_r, g_r = grads(net, x, pose, v, fused=False)
+    out_c, g_c = grads(net.cuda(), x.cuda(), pose.cuda(), v.cuda(), fused=True)
+    torch.testing.assert_close(out_c.cpu(), out_r, rtol=1e-10, atol=1e-10)
+    for name in g_r:
+        torch.testing.assert_close(g_c[name].cpu(), g_r[name], rtol=1e-8, atol=1e-8)

@@ -41,6 +41,11 @@ def pose_features(c2w: Tensor) -> Tensor:
     return torch.cat([c2w[..., :3, 3], c2w[..., :3, 0], c2w[..., :3, 1]], dim=-1)
 
 
+def block_rows(x: Tensor) -> int:
+    """Rows per block: ``CHUNK_ROWS`` on the CPU (cache-sized blocks), all rows at once on a GPU."""
+    return CHUNK_ROWS if x.device.type == "cpu" else max(1, x.shape[0])
+
+
 class FusedMLP(torch.autograd.Function):
     """``x`` (N, I) through linear layers ``(W_0, b_0, …, W_{L-1}, b_{L-1})`` (W_l: (out, in)) with ReLU between:
     (N, out_{L-1}). The forward keeps every hidden activation (after ReLU) for the backward; ReLU's derivative is
@@ -50,15 +55,16 @@ class FusedMLP(torch.autograd.Function):
     def forward(ctx, x: Tensor, *params: Tensor) -> Tensor:  # noqa: ANN001
         weights, biases = params[0::2], params[1::2]
         n = x.shape[0]
+        rows = block_rows(x)
         acts = [x.new_empty(n, w.shape[0]) for w in weights[:-1]]  # (N, width) per hidden activation
         out = x.new_empty(n, weights[-1].shape[0])
-        for s in range(0, n, CHUNK_ROWS):
-            h = x[s : s + CHUNK_ROWS]
+        for s in range(0, n, rows):
+            h = x[s : s + rows]
             for layer, (w, b) in enumerate(zip(weights, biases, strict=True)):
                 if layer < len(acts):
-                    h = torch.addmm(b, h, w.t(), out=acts[layer][s : s + CHUNK_ROWS]).relu_()
+                    h = torch.addmm(b, h, w.t(), out=acts[layer][s : s + rows]).relu_()
                 else:
-                    torch.addmm(b, h, w.t(), out=out[s : s + CHUNK_ROWS])
+                    torch.addmm(b, h, w.t(), out=out[s : s + rows])
         ctx.save_for_backward(x, *acts, *weights)
         ctx.n_layers = len(weights)
         return out
@@ -73,16 +79,17 @@ class FusedMLP(torch.autograd.Function):
         v_b = [w.new_zeros(w.shape[0]) for w in weights]
         v_x = torch.empty_like(x) if ctx.needs_input_grad[0] else None
         v_out = v_out.contiguous()
-        for s in range(0, x.shape[0], CHUNK_ROWS):
-            g = v_out[s : s + CHUNK_ROWS]  # gradient at the current layer's output
+        rows = block_rows(x)
+        for s in range(0, x.shape[0], rows):
+            g = v_out[s : s + rows]  # gradient at the current layer's output
             for layer in range(n_layers - 1, -1, -1):
-                a = inputs[layer][s : s + CHUNK_ROWS]
+                a = inputs[layer][s : s + rows]
                 v_w[layer].addmm_(g.t(), a)
                 v_b[layer] += g.sum(dim=0)
                 if layer > 0:
                     g = (g @ weights[layer]).mul_(a > 0)
                 elif v_x is not None:
-                    torch.mm(g, weights[0], out=v_x[s : s + CHUNK_ROWS])
+                    torch.mm(g, weights[0], out=v_x[s : s + rows])
         grads: list[Tensor | None] = [v_x]
         for w, b in zip(v_w, v_b, strict=True):
             grads += [w, b]
