@@ -6,10 +6,11 @@ A training step allocates and frees tensors of tens of MB (the ADE's hidden acti
 temporaries are fresh pages and the kernel faults and zeroes every 4 kB page at first touch: about 1.6 ms per
 17.5 MB on our machines (``bench/train.py`` measures the effect on a whole step, docs/benchmarks.md).
 
-:func:`keep_freed_memory` raises the mmap threshold to glibc's maximum (32 MB on 64-bit) and the trim threshold
-to 2 GB, the same as starting Python with ``MALLOC_MMAP_THRESHOLD_`` and
-``MALLOC_TRIM_THRESHOLD_`` set. The process then keeps its peak heap until it exits (a training job's peak is its
-working set anyway). Results do not change: only where the bytes live does.
+:func:`keep_freed_memory` turns mmap off for malloc (``M_MMAP_MAX`` 0: every block comes from the heap, also
+those above the 32 MB that glibc's mmap threshold can be raised to, e.g. width-512 activations) and raises the trim
+threshold to 2 GB, the same as starting Python with ``MALLOC_MMAP_MAX_=0`` and ``MALLOC_TRIM_THRESHOLD_`` set.
+The process then keeps its peak heap until it exits (a training job's peak is its working set anyway). Results do
+not change: only where the bytes live does.
 """
 
 from __future__ import annotations
@@ -21,8 +22,7 @@ import logging
 log = logging.getLogger(__name__)
 
 M_TRIM_THRESHOLD = -1  # glibc malloc.h
-M_MMAP_THRESHOLD = -3
-MMAP_THRESHOLD_MAX = 32 * 1024 * 1024  # glibc's DEFAULT_MMAP_THRESHOLD_MAX on 64-bit: larger values are refused
+M_MMAP_MAX = -4
 TRIM_THRESHOLD = 2**31 - 1  # 2 GB, mallopt's largest (an int): above any run's working set
 
 
@@ -38,7 +38,7 @@ def keep_freed_memory() -> bool:
         return False
     mallopt.argtypes = [ctypes.c_int, ctypes.c_int]
     mallopt.restype = ctypes.c_int
-    ok = mallopt(M_MMAP_THRESHOLD, MMAP_THRESHOLD_MAX) == 1
+    ok = mallopt(M_MMAP_MAX, 0) == 1
     ok = mallopt(M_TRIM_THRESHOLD, TRIM_THRESHOLD) == 1 and ok
     log.debug("malloc tuned to keep freed memory: %s", ok)
     return ok
