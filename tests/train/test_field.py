@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import json
+import logging
 import re
 import subprocess
 import sys
@@ -162,3 +163,20 @@ def test_field_runs_in_the_dag_write_and_evaluate_model_npz(tmp_path):
     assert """--config '{"method":"e2nerf","steps":9}'""" in out
     evals = re.findall(r"rule evaluate:\n    input: (results/toy/b4/\w+/model\.\w+)", out)
     assert sorted(evals) == ["results/toy/b4/e/model.npz", "results/toy/b4/g/model.ply", "results/toy/b4/n/model.npz"]
+
+
+def test_checkpoint_without_decay_base_resumes(data, tmp_path, caplog):
+    """A checkpoint whose grid optimiser groups lack ``base_lr`` (written before the learning-rate decay existed)
+    resumes instead of failing its first step (KeyError 'base_lr' in the measured run of `all`); the decay's base
+    comes from the run's options."""
+    cfg = _cfg("nerf", steps=40, checkpoint_every=20)
+    train_field(data, cfg, tmp_path / "run", stop_after=20)
+    ckpt = partial_dir_of(tmp_path / "run") / "checkpoint.pt"
+    state = torch.load(ckpt, weights_only=False)
+    for group in state["grid_opt"]["param_groups"]:
+        del group["base_lr"]
+    torch.save(state, ckpt)
+    with caplog.at_level(logging.INFO, logger="eigs.train.field_loop"):
+        res = train_field(data, cfg, tmp_path / "run")
+    assert "resumed from" in caplog.text and "at step 20" in caplog.text
+    assert int(res.rows[-1]["step"]) == 40

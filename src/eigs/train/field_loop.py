@@ -131,10 +131,19 @@ class FieldTrainer:
             return False
         self.model.load_state_dict(state["model"])
         self.grid_opt = self._grid_optimizer()
-        self.grid_opt.load_state_dict(state["grid_opt"])
-        self.method.load_state_dict(state["method"])
-        if self.method_opt is not None:
-            self.method_opt.load_state_dict(state["method_opt"])
+        base = [g["base_lr"] for g in self.grid_opt.param_groups]  # from the options, not from the file
+        try:
+            self.grid_opt.load_state_dict(state["grid_opt"])
+            self.method.load_state_dict(state["method"])
+            if self.method_opt is not None:
+                self.method_opt.load_state_dict(state["method_opt"])
+        except (ValueError, KeyError, RuntimeError) as err:  # optimiser groups of another layout: start over
+            log.warning("ignoring checkpoint %s: its optimiser state does not fit this run (%s)", path, err)
+            return False
+        # Adam's load_state_dict takes each group's hyperparameters from the file; a checkpoint written before the
+        # learning-rate decay existed has no base_lr (it failed the first step after resuming)
+        for group, b in zip(self.grid_opt.param_groups, base, strict=True):
+            group["base_lr"] = b
         self.gen.set_state(state["gen"])
         torch.set_rng_state(state["torch_rng"])
         self.step, self.rows, self.wall = int(state["step"]), list(state["rows"]), float(state["wall"])
