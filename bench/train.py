@@ -24,6 +24,7 @@ import time
 from pathlib import Path
 
 import torch
+import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench._report import add_out_argument, table, write_section  # noqa: E402
@@ -142,8 +143,8 @@ def method_breakdown(tr: Trainer, repeats: int) -> dict[str, float]:
     return res
 
 
-PLUS = {"pose_prior": True, "ade_zero_last": True, "blur_target": "discrete", "blur_weights": "trapezoid",
-        "latent_weight": 0.5}  # the default suite's eigs+ (config/config.yaml)
+SUITE = Path(__file__).resolve().parents[1] / "config" / "config.yaml"  # the default suite
+PLUS = yaml.safe_load(SUITE.read_text())["runs"]["eigs+"]["options"]["method_options"]  # its eigs+ run's options
 MALLOC_RUNS = (("3dgs", "3dgs", {}), ("e2gs", "e2gs", {}), ("eigs+", "eigs", PLUS))
 MALLOC_GAUSSIANS = 17_000  # the size the suite's multi-render runs end at (drums eigs+: 17,083 at step 1750)
 
@@ -265,7 +266,8 @@ def main() -> None:
         print(json.dumps(step_cost(data, json.loads(args.step_cost))))
         return
     keep_freed_memory()  # as `eigs train` does
-    malloc_section(args)
+    if not args.methods_only:
+        malloc_section(args)
     if args.malloc_only:
         return
     if args.quick:
