@@ -1,7 +1,9 @@
 """``eigs edi SCENE.h5 -o edi.h5``: EDI latent sharp frames (binning, E²NeRF or estimated mode, latent PNGs).
 
 Options: every default lives in :class:`eigs.events.options.EdiOptions`; ``--config JSON`` (the rule's ``edi:``
-config section) sets any of them, and a flag given here wins over it.
+config section) sets any of them, and a flag given here wins over it. ``--no-events`` (not an EDI option: the
+workflow's ``edi_frames`` job for a scene configured with ``events: false``) passes every view through as sharp
+without reading the events.
 """
 
 from __future__ import annotations
@@ -23,6 +25,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--config", metavar="JSON", help="options as one JSON object (keys as in the `edi:` config section)"
     )
+    parser.add_argument(
+        "--no-events", dest="events", action="store_false",
+        help="do not use the scene's events (a frames-only recording, or none wanted; the workflow's edi_frames job "
+        "for `events: false` scenes): every view is passed through as sharp, as for a scene without events, and "
+        "the event arrays are not read; the same edi.h5 and latent PNGs",
+    )  # fmt: skip
     parser.add_argument(
         "--mode", choices=MODES,
         help=f"auto: e2nerf for scenes ingested from E²NeRF layouts, estimated otherwise (default {_D.mode})",
@@ -65,6 +73,7 @@ def options(args: argparse.Namespace) -> EdiOptions:
 def run(args: argparse.Namespace) -> int:
     import logging
     import time
+    from pathlib import Path
 
     from eigs.artifacts.edi import write_edi, write_latent_pngs
     from eigs.events.pipeline import compute_edi
@@ -73,11 +82,15 @@ def run(args: argparse.Namespace) -> int:
     log = logging.getLogger("eigs.events")
     t0 = time.perf_counter()
     opts = options(args)
-    scene = read_scene(args.scene)
-    result = compute_edi(scene, opts, path=args.scene)
+    scene = read_scene(args.scene, events=args.events, binned=args.events)
+    result = compute_edi(scene, opts, path=args.scene, events=args.events)
     write_edi(result, args.output)
     if args.latent_dir:
-        n = write_latent_pngs(result.latent, args.latent_dir)
+        try:
+            n = write_latent_pngs(result.latent, args.latent_dir)
+        except BaseException:  # both artifacts or neither (each write is atomic)
+            Path(args.output).unlink(missing_ok=True)
+            raise
         log.info("wrote %d latent PNGs to %s", n, args.latent_dir)
     log.info(
         "%s: mode %s, B = %d, threshold %s (%s), %d sharp views, %.1f s",

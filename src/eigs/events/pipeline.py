@@ -3,13 +3,14 @@
 Steps per scene (``docs/edi.md``): choose the mode, the latent times and the bins; build the hot-pixel mask;
 per view count the events (views under :data:`SHARP_EVENTS_PER_PIXEL` are copied and marked sharp), bin them and,
 in estimated mode, build the exact exposure integral; estimate the threshold (scene or per view); compute the
-latent frames and store them in the scene's pixel domain.
+latent frames and store them in the scene's pixel domain. A scene without events (or run with ``events=False``)
+passes every view through as sharp: no binning, no threshold search.
 """
 
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -90,6 +91,11 @@ def _estimate_threshold(evidence: list[thr.ViewEvidence]) -> float:
     return c
 
 
+def without_events(scene: Scene) -> Scene:
+    """``scene`` without its raw and pre-binned events (a shallow copy; the arrays are shared)."""
+    return replace(scene, events=None, binned=None)
+
+
 @dataclass
 class _ViewEvents:
     """Per-view event data of one scene (V views, B bins, H × W pixels)."""
@@ -101,8 +107,11 @@ class _ViewEvents:
     evals: list[tuple[np.ndarray, np.ndarray] | None]  # (eval_counts, rate) for the threshold energy
 
 
-def compute_edi(scene: Scene, opts: EdiOptions, path: str = "") -> EdiResult:
-    """Run EDI on every view of ``scene``. ``path`` names the scene file in error messages.
+def compute_edi(scene: Scene, opts: EdiOptions, path: str = "", *, events: bool = True) -> EdiResult:
+    """Run EDI on every view of ``scene``. ``path`` names the scene file in error messages. ``events=False``
+    (``eigs edi --no-events``, the workflow's ``edi_frames`` job for a scene configured with ``events: false``)
+    ignores the scene's raw and pre-binned events: the result is the one of the same scene without events, every
+    view passed through as sharp (:func:`without_events`).
 
     Phases: check the options → bins and latent times → hot-pixel mask → per-view events → sharp views →
     threshold → per-pixel thresholds → latent frames.
@@ -110,12 +119,17 @@ def compute_edi(scene: Scene, opts: EdiOptions, path: str = "") -> EdiResult:
     path = path or scene.name
     scene.require("frames", path=path)
     assert scene.frames is not None
+    if not events:
+        scene = without_events(scene)
     mode = _check_options(scene, opts)
     raw = scene.events is not None and len(scene.events) > 0
     prebinned = scene.binned is not None and not raw
     bins, times = _bins_and_times(path, scene, opts, raw, prebinned)
     if not raw and not prebinned:
-        log.warning("the scene has no events: every view is passed through as sharp")
+        if events:
+            log.warning("the scene has no events: every view is passed through as sharp")
+        else:
+            log.info("events not used (--no-events): every view is passed through as sharp")
     hot = _hot_pixel_mask(scene, opts, mode, raw, prebinned)
     # instantaneous frames (no exposure windows) have no events inside them: zero counts, passed through
     in_exposures = raw and scene.frames.exposure_us is not None

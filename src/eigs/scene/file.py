@@ -218,7 +218,7 @@ def _opt(f: h5py.File, name: str) -> np.ndarray | None:
     return f[name][()] if name in f else None
 
 
-def _read_header(f: h5py.File) -> Scene:
+def _read_header(f: h5py.File, binned: bool = True) -> Scene:
     cam_g = f["camera"]
     camera = Camera(
         K=cam_g["K"][()],
@@ -231,9 +231,9 @@ def _read_header(f: h5py.File) -> Scene:
         frames = Frames(
             blurry=f["frames/blurry"][()], exposure_us=_opt(f, "frames/exposure_us"), t_us=_opt(f, "frames/t_us")
         )
-    binned = None
-    if "events/binned" in f:
-        binned = BinnedEvents(counts=f["events/binned"][()], bin_edges_us=f["events/bin_edges_us"][()])
+    counts = None
+    if binned and "events/binned" in f:
+        counts = BinnedEvents(counts=f["events/binned"][()], bin_edges_us=f["events/bin_edges_us"][()])
     poses = None
     if "poses" in f:
         poses = Poses(f["poses/latent_c2w"][()], f["poses/latent_t_us"][()], str(f["poses"].attrs["source"]))
@@ -256,19 +256,20 @@ def _read_header(f: h5py.File) -> Scene:
         contrast_threshold=None if ct is None else float(ct),
         source=str(f.attrs.get("source", "")),
         frames=frames,
-        binned=binned,
+        binned=counts,
         poses=poses,
         trajectory=trajectory,
         sharp=sharp,
     )
 
 
-def read_scene(path: str | os.PathLike, *, events: bool = True) -> Scene:
+def read_scene(path: str | os.PathLike, *, events: bool = True, binned: bool = True) -> Scene:
     """Read and validate a scene file. ``events=False`` skips the raw event arrays (``scene.events`` is then
-    None even when the file has events; use :func:`has_raw_events` / :func:`read_events`)."""
+    None even when the file has events; use :func:`has_raw_events` / :func:`read_events`); ``binned=False`` skips
+    the pre-binned counts (``scene.binned`` is then None)."""
     with _open_read(path) as f:
         try:
-            scene = _read_header(f)
+            scene = _read_header(f, binned)
             if events and "events/t" in f:
                 scene.events = Events(
                     f["events/x"][()],
