@@ -25,7 +25,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--steps", type=int, default=None, help="override the number of steps")
     p.add_argument("--device", default="auto", choices=("auto", "cpu", "cuda"), help="auto: CUDA when available")
-    p.add_argument("--list", action="store_true", help="list the methods and exit")
+    p.add_argument(
+        "--list", action="store_true",
+        help="list the methods and exit ([needs events]: not scheduled on scenes configured with `events: false`)",
+    )
 
 
 def resolve_steps(values: dict, given: dict, steps_arg: int | None) -> int:
@@ -51,11 +54,12 @@ def run(args: argparse.Namespace) -> int:
     from eigs.train.data import load_train_data
     from eigs.train.field_methods import is_field_method
     from eigs.train.loop import train
-    from eigs.train.methods import method_description, method_names
+    from eigs.train.methods import method_description, method_names, method_needs_events
 
     if args.list:
         for name in method_names():
-            print(f"{name:16s} {method_description(name)}")
+            events = " [needs events]" if method_needs_events(name) else ""
+            print(f"{name:16s} {method_description(name)}{events}")
         return 0
     missing = [n for n in ("scene", "edi", "sfm", "init", "output") if getattr(args, n) is None]
     if missing:

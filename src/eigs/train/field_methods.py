@@ -30,6 +30,8 @@ from eigs.train.config import TrainConfig
 from eigs.train.data import TrainData
 from eigs.train.field_config import DeblurNerfOptions, E2NerfOptions, FieldOptions, options_dict
 from eigs.train.field_model import FieldModel
+from eigs.train.method_inputs import needs_events
+from eigs.train.methods import warn_without_events
 
 
 @dataclass
@@ -86,12 +88,14 @@ class FieldMethod(ABC):
 
     name: ClassVar[str] = ""
     description: ClassVar[str] = ""
+    needs_events: ClassVar[bool] = False  # from eigs.train.method_inputs.EVENT_METHODS
     OWN: ClassVar[tuple[type, ...]] = ()  # the method's own option dataclasses
     OPTIONS: ClassVar[dict[str, Any]] = {}
 
     def __init_subclass__(cls, **kw: Any) -> None:
         super().__init_subclass__(**kw)
         cls.OPTIONS = options_dict(FieldOptions(), *(c() for c in cls.OWN))
+        cls.needs_events = needs_events(cls.name)
 
     def __init__(self, data: TrainData, cfg: TrainConfig, device: torch.device):
         where = f"method {self.name}"
@@ -165,6 +169,7 @@ def make_field_method(data: TrainData, cfg: TrainConfig, device: torch.device) -
     cls = FIELD_REGISTRY.get(cfg.method)
     if cls is None:
         raise EigsError("train", f"{cfg.method!r} is not a field method; known: {', '.join(sorted(FIELD_REGISTRY))}")
+    warn_without_events(cls.name, cls.needs_events, data)
     return cls(data, cfg, device)
 
 

@@ -7,6 +7,7 @@ and decorating it with :func:`register`.
 
 from __future__ import annotations
 
+import logging
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
@@ -19,6 +20,7 @@ from eigs.errors import EigsError
 from eigs.losses import photometric_loss
 from eigs.train.config import TrainConfig
 from eigs.train.data import TrainData
+from eigs.train.method_inputs import needs_events
 from eigs.train.model import GaussianModel
 
 
@@ -33,12 +35,18 @@ class StepOutput:
 
 class Method(ABC):
     """Base class. ``options``: the method's own options (``TrainConfig.method_options``), validated against
-    ``OPTIONS`` (name → default)."""
+    ``OPTIONS`` (name → default). ``needs_events``: set from :data:`eigs.train.method_inputs.EVENT_METHODS` (the
+    one source the workflow reads too)."""
 
     name: ClassVar[str] = ""
     description: ClassVar[str] = ""
     needs_ground_truth: ClassVar[bool] = False
+    needs_events: ClassVar[bool] = False
     OPTIONS: ClassVar[dict[str, Any]] = {}
+
+    def __init_subclass__(cls, **kw: Any) -> None:
+        super().__init_subclass__(**kw)
+        cls.needs_events = needs_events(cls.name)
 
     def __init__(self, data: TrainData, cfg: TrainConfig, device: torch.device):
         unknown = sorted(set(cfg.method_options) - set(self.OPTIONS))
@@ -104,7 +112,18 @@ def make_method(data: TrainData, cfg: TrainConfig, device: torch.device) -> Meth
         raise EigsError("train", f"unknown method {cfg.method!r}; known: {', '.join(sorted(REGISTRY))}")
     if cls.needs_ground_truth and data.sharp_train is None:
         raise EigsError(data.scene.name, f"method {cfg.method} needs ground-truth sharp images of the training views")
+    warn_without_events(cls.name, cls.needs_events, data)
     return cls(data, cfg, device)
+
+
+def warn_without_events(method: str, reads_events: bool, data: TrainData) -> None:
+    """Log a warning when a method that reads events trains on an EDI artifact without any (a scene without events,
+    or ``eigs edi --no-events``: every latent frame is the blurry frame; the workflow does not schedule such runs)."""
+    if reads_events and not np.asarray(data.edi.event_count).any():
+        logging.getLogger("eigs.train").warning(
+            "method %s reads events, but the EDI artifact of %s has none (every view passed through as sharp): "
+            "it trains on the blurry frames only", method, data.scene.name,
+        )  # fmt: skip
 
 
 class ImageMethod(Method):
@@ -168,6 +187,14 @@ def method_names() -> list[str]:
 
     _load_all()
     return sorted({*REGISTRY, *FIELD_REGISTRY})
+
+
+def method_needs_events(name: str) -> bool:
+    """The ``needs_events`` of a registered method (Gaussian or radiance field)."""
+    from eigs.train.field_methods import FIELD_REGISTRY
+
+    _load_all()
+    return (REGISTRY.get(name) or FIELD_REGISTRY[name]).needs_events
 
 
 def method_description(name: str) -> str:
