@@ -11,6 +11,7 @@ from snakemake.utils import validate
 from eigs.events.options import DEFAULT_BINS
 from eigs.sfm.options import SfmConfig
 from eigs.train.field_config import FIELD_METHODS
+from eigs.train.method_inputs import EVENT_METHODS
 
 
 validate(config, schema="../workflow/schemas/config.schema.yaml")
@@ -95,6 +96,16 @@ def init_config(wildcards):
 
 
 # --- edi (rules/edi.smk) --------------------------------------------------------------------------------------
+def scene_uses_events(scene):
+    """False for a scene configured with `events: false` (a frames-only recording, or no events wanted): its
+    edi_frames job passes the frames through (`eigs edi --no-events`) and no method that needs events trains on it."""
+    return SCENES[scene].get("events", True) is not False
+
+
+EVENT_SCENES = [s for s in ALL_SCENES if scene_uses_events(s)]  # rule edi
+FRAMES_ONLY_SCENES = [s for s in ALL_SCENES if not scene_uses_events(s)]  # rule edi_frames
+
+
 def edi_bins():
     """The configured bin counts (config `edi: bins:`, default [eigs.events.options.DEFAULT_BINS])."""
     return [int(b) for b in config.get("edi", {}).get("bins", [DEFAULT_BINS])]
@@ -122,12 +133,24 @@ def scene_has_ground_truth(scene):
 
 def run_scenes(run):
     """Scenes a run is trained on: its `scenes:` list, else every scene (methods that train on ground truth,
-    such as `oracle`, only on scenes that have it)."""
+    such as `oracle`, only on scenes that have it; methods that need events, eigs.train.method_inputs.EVENT_METHODS,
+    only on scenes that have them). A `scenes:` list naming an `events: false` scene for such a method is an error."""
     spec = RUNS[run]
+    method = spec["method"]
     if "scenes" in spec:
-        return [s for s in spec["scenes"] if s in SCENES]
-    if spec["method"] == "oracle":
+        scenes = [s for s in spec["scenes"] if s in SCENES]
+        frames_only = [s for s in scenes if not scene_uses_events(s)]
+        if method in EVENT_METHODS and frames_only:
+            raise ValueError(
+                f"config: run {run} (method {method}, which needs events) lists scene(s) "
+                f"{', '.join(frames_only)} configured with `events: false`; remove them from its `scenes:` or use a "
+                "method that trains on the frames alone"
+            )
+        return scenes
+    if method == "oracle":
         return [s for s in ALL_SCENES if scene_has_ground_truth(s)]
+    if method in EVENT_METHODS:
+        return EVENT_SCENES
     return ALL_SCENES
 
 
@@ -136,6 +159,8 @@ def run_model_file(run):
     return "model.npz" if RUNS[run]["method"] in FIELD_METHODS else "model.ply"
 
 
+for _run in RUNS:  # config errors of the runs' scene lists now, not when a rule first asks
+    run_scenes(_run)
 GAUSSIAN_RUNS = sorted(r for r in RUNS if run_model_file(r) == "model.ply")
 FIELD_RUNS = sorted(r for r in RUNS if run_model_file(r) == "model.npz")
 

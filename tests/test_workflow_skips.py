@@ -1,12 +1,15 @@
 """What a scene does not need is not scheduled (issue 20), checked on dry runs of small configs: ground-truth poses
-skip COLMAP (an `sfm_given` job instead of `sfm`); upstream artifacts are one job per scene and B whatever the number
-of runs; a run several tables use trains once; a config change that does not touch a stage does not rerun it
-(Snakemake's params trigger, on outputs marked up to date with `--touch`).
+skip COLMAP (an `sfm_given` job instead of `sfm`); a scene configured with `events: false` gets an `edi_frames` job
+(`eigs edi --no-events`) instead of `edi` and no training or evaluation job of a method that needs events
+(eigs.train.method_inputs.EVENT_METHODS); upstream artifacts are one job per scene and B whatever the number of runs;
+a run several tables use trains once; a config change that does not touch a stage does not rerun it (Snakemake's
+params trigger, on outputs marked up to date with `--touch`).
 
-Skips inside a job are tested where they happen: a scene without events passes EDI through with every view sharp
-(tests/events/test_edi.py, tests/synth/test_still_views.py) and a sharp view trains on one render without event
-loss (tests/train/test_deblur.py::test_sharp_views_use_one_render); scenes without ground truth are scored by
-BRISQUE only and synthetic scenes by reference metrics only (tests/evaluate/test_evaluate.py)."""
+Skips inside a job are tested where they happen: `--no-events` and a scene whose file has no events pass every view
+through as sharp (tests/events/test_cli.py, tests/events/test_edi.py), as do views without motion
+(tests/synth/test_still_views.py), and a sharp view trains on one render without event loss
+(tests/train/test_deblur.py::test_sharp_views_use_one_render); scenes without ground truth are scored by BRISQUE only
+and synthetic scenes by reference metrics only (tests/evaluate/test_evaluate.py)."""
 
 from __future__ import annotations
 
@@ -18,19 +21,21 @@ from pathlib import Path
 import pytest
 import yaml
 
+from eigs.train.method_inputs import EVENT_METHODS
+
 REPO = Path(__file__).resolve().parents[1]
 SNAKEFILE = REPO / "workflow" / "Snakefile"
 # directory() outputs of the rules (the others are files)
 DIRECTORY_OUTPUTS = re.compile(r"/(latent|sfm|renders)$")
 
 
-def snakemake(workdir: Path, cfg: dict, *args: str) -> subprocess.CompletedProcess:
+def snakemake(workdir: Path, cfg: dict, *args: str, ok: bool = True) -> subprocess.CompletedProcess:
     path = workdir / "config.yaml"
     path.write_text(yaml.safe_dump(cfg))
     cmd = [sys.executable, "-m", "snakemake", *args, "--cores", "1", "-s", str(SNAKEFILE), "--directory",
            str(workdir), f"--configfile={path}"]  # fmt: skip
     proc = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, check=False, timeout=300)
-    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    assert (proc.returncode == 0) == ok, proc.stdout[-3000:] + proc.stderr[-3000:]
     return proc
 
 
@@ -73,6 +78,46 @@ def test_ingested_scenes_keep_the_colmap_job(tmp_path):
     cfg = {"scenes": {"toy": {"builtin": "toy"}, "mine": {"source": str(src), "format": "txt"}}, "threads": 1}
     counts = job_counts(snakemake(tmp_path, cfg, "all_sfm", "-n", "--forceall").stdout)
     assert counts["sfm_given"] == 1 and counts["sfm"] == 1
+
+
+# methods that train on the frames (or the ground truth) alone, beside every method that needs events
+FRAMES_METHODS = ("3dgs", "oracle", "eigs-minus", "deblurring-gs", "bad-gaussians", "nerf", "deblur-nerf")
+
+
+def test_scene_without_events_schedules_edi_frames_and_no_event_method(tmp_path):
+    """Two scenes, one with `events: false`, at B = 4 and 6: per B one `edi` job (the evented scene) and one
+    `edi_frames` job running `eigs edi --no-events` (the other); every method that needs events trains and is
+    evaluated on the evented scene only, every other method on both; SfM and init stay one job per scene and B."""
+    runs = {m: {"method": m, "options": {"steps": 10}} for m in (*sorted(EVENT_METHODS), *FRAMES_METHODS)}
+    cfg = {"scenes": {"ev": {"builtin": "toy"}, "frames": {"builtin": "toy", "events": False}}, "threads": 1,
+           "edi": {"bins": [4, 6]}, "runs": runs}  # fmt: skip
+    proc = snakemake(tmp_path, cfg, "all", "-n", "-p", "--forceall")
+    counts = job_counts(proc.stdout)
+    assert counts["edi"] == counts["edi_frames"] == 2
+    assert counts["sfm_given"] == counts["init"] == 2 * 2
+    trained = set(re.findall(r"output: results/(\w+)/b4/([\w+-]+)/model\.(?:ply|npz)", proc.stdout))
+    evaluated = set(re.findall(r"output: results/(\w+)/b4/eval/([\w+-]+)/metrics\.json", proc.stdout))
+    expect = {("ev", m) for m in runs} | {("frames", m) for m in FRAMES_METHODS}
+    assert trained == evaluated == expect
+    assert counts.get("train", 0) + counts.get("train_field", 0) == counts["evaluate"] == len(expect)
+    commands = [ln for ln in proc.stdout.splitlines() if ln.startswith("Shell command: eigs edi ")]
+    frames = [c for c in commands if "logs/edi_frames/frames_b" in c]
+    assert len(commands) == 4 and len(frames) == 2
+    assert all(("--no-events" in c) == (c in frames) for c in commands)
+    assert all("results/frames/" in c for c in frames)
+
+
+def test_event_method_listing_a_scene_without_events_is_a_config_error(tmp_path):
+    """A run's explicit `scenes:` naming an `events: false` scene for a method that needs events fails at parse time
+    with a message naming the run and the scene, instead of silently dropping the scene; a frames-only method may."""
+    scenes = {"ev": {"builtin": "toy"}, "frames": {"builtin": "toy", "events": False}}
+    cfg = {"scenes": scenes, "runs": {"mine": {"method": "e2gs", "scenes": ["ev", "frames"]}}}
+    proc = snakemake(tmp_path, cfg, "all", "-n", ok=False)
+    assert re.search(r"run mine \(method e2gs.*\) lists scene\(s\) frames configured with `events: false`",
+                     proc.stdout + proc.stderr)  # fmt: skip
+    cfg["runs"]["mine"]["method"] = "3dgs"
+    counts = job_counts(snakemake(tmp_path, cfg, "all", "-n", "--forceall").stdout)
+    assert counts["train"] == 2 and counts["edi_frames"] == 1
 
 
 def test_upstream_artifacts_once_per_scene_and_bins_whatever_the_runs(tmp_path):
