@@ -207,3 +207,23 @@ def test_distance_to_oracle_is_paired_over_the_scenes_both_runs_have(metrics_fil
 
 def test_brace_pattern_keeps_absolute_paths_absolute():
     assert brace_pattern(["/tmp/x/a/run", "/tmp/x/b/run"]) == "/tmp/x/{a,b}/run"
+
+
+def test_a_run_missing_on_a_scene_averages_the_scenes_it_has(metrics_files, tmp_path):
+    """A run not trained on one scene (e.g. an event method on an `events: false` scene, which the workflow does not
+    schedule): its cells are the means over the scenes it has, its `scenes` column says how many, its distance to the
+    oracle is paired over those scenes, it is still ranked, and per_scene.csv has no row for the missing scene."""
+    files = [f for f in metrics_files if f.parts[-5:-3] != ("beta", "b4") or f.parts[-2] != "e2gs"]
+    assert len(files) == len(metrics_files) - 1
+    t1 = build_tables({"table1": MAPPING["table1"]}, summarise(files))[0]
+    e2gs = row(t1, "e2gs")
+    assert e2gs.cells["psnr"].ours == pytest.approx(24.0) and e2gs.cells["lpips"].ours == pytest.approx(0.20)
+    assert e2gs.n_scenes == 1 and e2gs.source == "results/alpha/b4/e2gs"
+    assert e2gs.d_oracle["psnr"] == pytest.approx(24.0 - 30.0)  # the oracle on alpha, not its mean 30.5
+    assert e2gs.cells["psnr"].rank == 2 and row(t1, "eigs").n_scenes == 3
+    md_row = next(ln for ln in to_markdown(t1).splitlines() if ln.startswith("| E2GS"))
+    assert md_row.split(" | ")[-2:] == ["1", "results/alpha/b4/e2gs |"]
+    out, mapping = tmp_path / "tables", json.dumps({"table1": MAPPING["table1"]})
+    assert main(["tables", *map(str, files), "--tables", mapping, "-o", str(out)]) == 0
+    per = list(csv.DictReader((out / "per_scene.csv").open()))
+    assert len(per) == len(files) and [r["scene"] for r in per if r["run"] == "e2gs"] == ["alpha"]
