@@ -265,13 +265,23 @@ def skips(d: Path, facts: dict, fig: Path) -> str:
         f"ATE {fmt(colmap_ate)} % → {fmt(given_ate)} % (exact poses)",
         "sfm.json (`--given`)",
     )
+    ev_runs = facts.get("event_runs", {})
+    unmeasured = sorted({r["method"] for r in ev_runs.values() if r["method"] not in steps})
+    ev_train = None if unmeasured or not ev_runs else sum(
+        steps[r["method"]] / 1e3 * (r["steps"] or n_steps) for r in ev_runs.values())  # fmt: skip
+    names = ", ".join(f"`{name}`" for name in sorted(ev_runs)) or "none in this config"
     add(
-        "scene without events: no event stages",
-        "EDI passes the frames through (every view sharp): no binning, threshold search or latent frames",
-        edi_s,
-        " per scene and B (estimated mode, B = 4)",
-        "none (nothing to deblur with)",
-        "edi.json",
+        "scene without events (`events: false`): no event stages",
+        f"an `edi_frames` job (`eigs edi --no-events`: every view passed through as sharp, no binning or threshold "
+        f"search) instead of `edi`, and the training and evaluation jobs of the runs whose method needs events "
+        f"(eigs.train.method_inputs; {names}) not scheduled on that scene ({facts.get('frames_only', '?')} such "
+        f"scene(s) of this config): EDI {s(edi_s)}, their training "
+        + (s(ev_train) if ev_train is not None else f"not measured ({', '.join(unmeasured) or 'no such run'})"),
+        None if edi_s is None else edi_s + (ev_train or 0.0),
+        " per scene (EDI at B = 4, estimated mode" + (" + the event runs' step time × steps)" if ev_train else ")"),
+        "none for the runs kept (nothing to deblur with); the event runs have no result there (their table cells "
+        "average the scenes they have)",
+        "edi.json, train-step-methods.json, config",
     )
     one = minus(steps.get("eigs"), steps.get("3dgs"))
     add(

@@ -1,5 +1,6 @@
 """Simulate the workflow's schedule on N cores from per-job times: how long `snakemake --cores N all` takes when the
-jobs are independent except for their inputs (synth → edi → sfm → init per scene and B; train → evaluate per run;
+jobs are independent except for their inputs (synth → edi (edi_frames on `events: false` scenes) → sfm → init per
+scene and B; train → evaluate per run, not for methods that need events on `events: false` scenes;
 tables and figures last). Jobs take their rule's threads (config `threads`; init, resources, evaluate, tables and
 figures 1), a job starts as soon as its inputs exist and enough cores are free, longest remaining path first.
 
@@ -21,6 +22,8 @@ from pathlib import Path
 
 import yaml
 
+from eigs.train.method_inputs import EVENT_METHODS
+
 
 def jobs_of(cfg: dict) -> dict[str, tuple[str, list[str], int]]:
     """Job id → (benchmark name, dependencies, threads) for the `all` target of ``cfg``."""
@@ -33,7 +36,10 @@ def jobs_of(cfg: dict) -> dict[str, tuple[str, list[str], int]]:
         builtin = "builtin" in spec
         jobs[f"scene:{s}"] = (f"synth/{s}" if builtin else f"ingest/{s}", [], threads if builtin else 1)
         for b in cfg.get("edi", {}).get("bins", [4]):
-            jobs[f"edi:{s}:{b}"] = (f"edi/{s}_b{b}", [f"scene:{s}"], threads)
+            if spec.get("events", True) is False:  # rules/edi.smk edi_frames: the frames passed through, 1 thread
+                jobs[f"edi:{s}:{b}"] = (f"edi_frames/{s}_b{b}", [f"scene:{s}"], 1)
+            else:
+                jobs[f"edi:{s}:{b}"] = (f"edi/{s}_b{b}", [f"scene:{s}"], threads)
             jobs[f"sfm:{s}:{b}"] = (f"sfm/{s}_b{b}", [f"edi:{s}:{b}"], threads)
             jobs[f"init:{s}:{b}"] = (f"init/{s}_b{b}", [f"sfm:{s}:{b}"], 1)
     evals = []
@@ -44,6 +50,8 @@ def jobs_of(cfg: dict) -> dict[str, tuple[str, list[str], int]]:
             if spec.get("scenes") and s not in spec["scenes"]:
                 continue
             if gt_only and not ("builtin" in sspec or sspec.get("format") == "e2nerf-synthetic"):
+                continue
+            if spec["method"] in EVENT_METHODS and sspec.get("events", True) is False:  # not scheduled there
                 continue
             jobs[f"train:{s}:{r}"] = (f"train/{s}_b{b}_{r}", [f"init:{s}:{b}"], threads)
             jobs[f"evaluate:{s}:{r}"] = (f"evaluate/{s}_b{b}_{r}", [f"train:{s}:{r}", "resources"], 1)

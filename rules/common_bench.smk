@@ -32,13 +32,19 @@ def bench_train_scene():
 
 def bench_facts():
     """Job counts of this config for the skips table (bench/report.py): training and upstream jobs, scenes whose SfM
-    uses given poses, and per run named by a table row: its method, the number of rows naming it and its `steps`
-    option (null: the TrainConfig default)."""
+    uses given poses, scenes configured with `events: false`, per run named by a table row: its method, the number
+    of rows naming it and its `steps` option (null: the TrainConfig default), and the same for every run whose method
+    needs events (not scheduled on `events: false` scenes)."""
     named = [run for rows in TABLE_ROWS.values() for run in rows.values() if run in RUNS]
+
+    def run_facts(r):
+        return {"method": RUNS[r]["method"], "steps": RUNS[r].get("options", {}).get("steps")}
+
     return config_json({
         "train_jobs": sum(len(run_scenes(r)) for r in RUNS),
         "upstream_jobs": len(ALL_SCENES) * len(edi_bins()),
         "sfm_given": len(SFM_GIVEN_SCENES),
-        "table_runs": {r: {"method": RUNS[r]["method"], "rows": named.count(r),
-                           "steps": RUNS[r].get("options", {}).get("steps")} for r in sorted(set(named))},
+        "frames_only": len(FRAMES_ONLY_SCENES),
+        "table_runs": {r: {**run_facts(r), "rows": named.count(r)} for r in sorted(set(named))},
+        "event_runs": {r: run_facts(r) for r in sorted(RUNS) if RUNS[r]["method"] in EVENT_METHODS},
     })  # fmt: skip

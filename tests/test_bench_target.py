@@ -1,6 +1,7 @@
 """The workflow's `bench` target (rules/bench.smk), on dry runs: not part of `all`; every bench script once; the full
 mode regenerates docs/benchmarks.md, the quick mode writes results/bench/benchmarks.md and leaves docs/ alone; the
-option is validated. And the Pareto front of bench/report.py against its definition."""
+option is validated. And the Pareto front of bench/report.py against its definition, and its skips table (the
+`events: false` row) with its figure from small measurements."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bench.report import pareto
+from bench.report import pareto, skips, train_steps
 
 REPO = Path(__file__).resolve().parents[1]
 SCRIPTS = {"edi", "ingest", "rasterizer", "sfm", "synth"}  # bench_script jobs (metrics and train: own rules)
@@ -71,3 +72,24 @@ def test_pareto_front_against_its_definition():
         pts = list(dict.fromkeys(pts))
         expect = sorted(p for p in pts if not any(q[0] <= p[0] and q[1] <= p[1] and q != p for q in pts))
         assert pareto(pts) == expect, pts
+
+
+def test_skips_table_counts_edi_and_the_event_runs_training_of_a_scene_without_events(tmp_path):
+    """The `events: false` row: an `edi_frames` job instead of `edi` and the event runs not scheduled; the time saved
+    per scene is the EDI time plus each event run's step time × its steps; the figure is written."""
+    import json
+
+    (tmp_path / "edi.json").write_text(json.dumps({"data": {"runtime_error": [
+        {"bins": 4, "mode": "estimated", "time_s": 3.0}]}}))  # fmt: skip
+    methods = [{"method": "3dgs", "step_ms": 10.0}, {"method": "eigs", "step_ms": 100.0},
+               {"method": "e2gs", "step_ms": 50.0}]  # fmt: skip
+    (tmp_path / "train-step-methods.json").write_text(json.dumps({"data": {"methods": methods}}))
+    facts = {"frames_only": 1, "train_jobs": 5, "upstream_jobs": 2,
+             "event_runs": {"eigs": {"method": "eigs", "steps": 20}, "e2gs": {"method": "e2gs", "steps": None}}}
+    fig = tmp_path / "bench_skips.png"
+    md = skips(tmp_path, facts, fig)
+    line = next(ln for ln in md.splitlines() if "events: false" in ln)
+    assert "`edi_frames`" in line and "`e2gs`, `eigs`" in line and "not scheduled" in line
+    steps = train_steps()  # a run without `steps`: eigs.train.config.TrainConfig's
+    assert f"{3.0 + 100.0 / 1e3 * 20 + 50.0 / 1e3 * steps:.3g} s per scene" in line
+    assert fig.stat().st_size > 0
