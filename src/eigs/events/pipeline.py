@@ -304,7 +304,10 @@ def _thresholds(
         return thresholds, "given"
     if not evidence:
         thresholds[:] = scene.contrast_threshold or FALLBACK_C
-        log.warning("no view has events: threshold set to %.3f without estimation", thresholds[0])
+        # a warning when events were there but too few; none used at all was said already
+        (log.warning if ve.event_count.any() else log.info)(
+            "no view has events: threshold set to %.3f without estimation", thresholds[0]
+        )
         return thresholds, opts.threshold_scope
     if opts.threshold_scope == "scene":
         keys = sorted(evidence)
