@@ -130,6 +130,10 @@ def test_option_errors(data):
         _method(data, "eigs", event_loss="mse")
     with pytest.raises(EigsError, match="unknown option"):
         _method(data, "eigs", widht=3)
+    with pytest.raises(EigsError, match="ade_precision"):
+        _method(data, "eigs", ade_precision="float16")
+    assert _method(data, "eigs", ade_precision="bfloat16").method.ade.matmul_dtype is torch.bfloat16
+    assert _method(data, "eigs", ade_precision="float32").method.ade.matmul_dtype is None
     assert np.isfinite(_method(data, "eigs-minus").method.step(_method(data, "eigs-minus").model, 0, 0, 0).loss.item())
 
 

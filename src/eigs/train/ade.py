@@ -25,6 +25,7 @@ import torch
 from torch import Tensor, nn
 
 CHUNK_ROWS = 1024  # Gaussians per block of FusedMLP (1024–2048 measured fastest; 4096 and whole-array slower)
+CHUNK_ROWS_BF16 = 4096  # the same in bfloat16 (AMX, 17k rows, one thread: 1024 43 ms, 2048 35, 4096 33, all 51)
 
 
 def frequency_encoding(p: Tensor, n_freqs: int) -> Tensor:
@@ -42,31 +43,73 @@ def pose_features(c2w: Tensor) -> Tensor:
 
 
 def block_rows(x: Tensor) -> int:
-    """Rows per block: ``CHUNK_ROWS`` on the CPU (cache-sized blocks), all rows at once on a GPU."""
-    return CHUNK_ROWS if x.device.type == "cpu" else max(1, x.shape[0])
+    """Rows per block: ``CHUNK_ROWS`` (``CHUNK_ROWS_BF16`` for bfloat16 ``x``) on the CPU (cache-sized blocks), all
+    rows at once on a GPU."""
+    if x.device.type != "cpu":
+        return max(1, x.shape[0])
+    return CHUNK_ROWS_BF16 if x.dtype == torch.bfloat16 else CHUNK_ROWS
+
+
+PRECISIONS = ("auto", "float32", "bfloat16")
+
+
+def bf16_matmul_is_native(device: torch.device) -> bool:
+    """Whether bfloat16 matrix products run in hardware on ``device``: a CPU with AMX tiles or AVX512-BF16 (oneDNN
+    uses them), or a CUDA GPU that supports bfloat16. Elsewhere bfloat16 is emulated and slower than float32."""
+    if device.type == "cuda":
+        return bool(torch.cuda.is_bf16_supported())
+    if device.type != "cpu":
+        return False
+    cpu = torch.cpu
+    checks = ("_is_amx_tile_supported", "_is_avx512_bf16_supported")
+    return any(bool(getattr(cpu, name, lambda: False)()) for name in checks)
+
+
+def compute_dtype(precision: str, device: torch.device) -> torch.dtype | None:
+    """The dtype the ADE's matrix products run in for option ``precision`` (:data:`PRECISIONS`): None = the
+    parameters' own dtype (float32), ``torch.bfloat16`` for ``bfloat16``, and for ``auto`` bfloat16 where
+    :func:`bf16_matmul_is_native`, else None."""
+    if precision not in PRECISIONS:
+        raise ValueError(f"ADE precision must be one of {', '.join(PRECISIONS)}, got {precision!r}")
+    if precision == "bfloat16" or (precision == "auto" and bf16_matmul_is_native(device)):
+        return torch.bfloat16
+    return None
 
 
 class FusedMLP(torch.autograd.Function):
     """``x`` (N, I) through linear layers ``(W_0, b_0, …, W_{L-1}, b_{L-1})`` (W_l: (out, in)) with ReLU between:
-    (N, out_{L-1}). The forward keeps every hidden activation (after ReLU) for the backward; ReLU's derivative is
-    read from them (an activation > 0 ⟺ its pre-activation > 0)."""
+    (N, out_{L-1}) in ``x``'s dtype. The forward keeps every hidden activation (after ReLU) for the backward; ReLU's
+    derivative is read from them (an activation > 0 ⟺ its pre-activation > 0).
+
+    ``dtype``: the dtype of the matrix products and of the kept activations (None: ``x``'s own). With
+    ``torch.bfloat16`` (mixed precision) the products accumulate in float32 inside the kernel and round their
+    results to bfloat16 (8 significant bits); the output, ``v_x`` and the parameter gradients are returned in the
+    parameters' dtype, the weight gradients summed over blocks in it. Promised: relative error ≲ 1e-2 of the
+    largest entry (tests/train/test_ade.py measures it against float64)."""
 
     @staticmethod
-    def forward(ctx, x: Tensor, *params: Tensor) -> Tensor:  # noqa: ANN001
-        weights, biases = params[0::2], params[1::2]
+    def forward(ctx, x: Tensor, dtype: torch.dtype | None, *params: Tensor) -> Tensor:  # noqa: ANN001
+        cd = dtype or x.dtype
+        weights = [w.to(cd) for w in params[0::2]]
+        biases = [b.to(cd) for b in params[1::2]]
+        xc = x.to(cd)
         n = x.shape[0]
-        rows = block_rows(x)
-        acts = [x.new_empty(n, w.shape[0]) for w in weights[:-1]]  # (N, width) per hidden activation
+        rows = block_rows(xc)
+        acts = [xc.new_empty(n, w.shape[0]) for w in weights[:-1]]  # (N, width) per hidden activation
         out = x.new_empty(n, weights[-1].shape[0])
+        last = xc.new_empty(min(rows, n), weights[-1].shape[0]) if cd != x.dtype else None
         for s in range(0, n, rows):
-            h = x[s : s + rows]
+            h = xc[s : s + rows]
             for layer, (w, b) in enumerate(zip(weights, biases, strict=True)):
                 if layer < len(acts):
                     h = torch.addmm(b, h, w.t(), out=acts[layer][s : s + rows]).relu_()
-                else:
+                elif last is None:
                     torch.addmm(b, h, w.t(), out=out[s : s + rows])
-        ctx.save_for_backward(x, *acts, *weights)
+                else:
+                    out[s : s + rows] = torch.addmm(b, h, w.t(), out=last[: h.shape[0]])
+        ctx.save_for_backward(xc, *acts, *weights)
         ctx.n_layers = len(weights)
+        ctx.param_dtype = params[0].dtype
         return out
 
     @staticmethod
@@ -74,23 +117,30 @@ class FusedMLP(torch.autograd.Function):
         saved = ctx.saved_tensors
         n_layers = ctx.n_layers
         x, acts, weights = saved[0], saved[1:n_layers], saved[n_layers:]
+        cd, pd = x.dtype, ctx.param_dtype
         inputs = (x, *acts)  # the input of each layer
-        v_w = [torch.zeros_like(w) for w in weights]
-        v_b = [w.new_zeros(w.shape[0]) for w in weights]
-        v_x = torch.empty_like(x) if ctx.needs_input_grad[0] else None
-        v_out = v_out.contiguous()
+        v_w = [torch.zeros(w.shape, dtype=pd, device=w.device) for w in weights]
+        v_b = [torch.zeros(w.shape[0], dtype=pd, device=w.device) for w in weights]
+        v_x = torch.empty(x.shape, dtype=v_out.dtype, device=x.device) if ctx.needs_input_grad[0] else None
+        v_out = v_out.to(cd).contiguous()
         rows = block_rows(x)
         for s in range(0, x.shape[0], rows):
             g = v_out[s : s + rows]  # gradient at the current layer's output
             for layer in range(n_layers - 1, -1, -1):
                 a = inputs[layer][s : s + rows]
-                v_w[layer].addmm_(g.t(), a)
-                v_b[layer] += g.sum(dim=0)
-                if layer > 0:
-                    g = (g @ weights[layer]).mul_(a > 0)
+                if cd == pd:
+                    v_w[layer].addmm_(g.t(), a)
+                else:  # a block's product in the compute dtype, summed over blocks in the parameters' dtype
+                    v_w[layer] += torch.mm(g.t(), a)
+                v_b[layer] += g.sum(dim=0)  # accumulated in float32 by the kernel whatever g's dtype
+                if layer > 0:  # ReLU's backward in one pass: g·W where the activation is > 0, else 0
+                    g = torch.ops.aten.threshold_backward(g @ weights[layer], a, 0)
                 elif v_x is not None:
-                    torch.mm(g, weights[0], out=v_x[s : s + rows])
-        grads: list[Tensor | None] = [v_x]
+                    if cd == v_x.dtype:
+                        torch.mm(g, weights[0], out=v_x[s : s + rows])
+                    else:
+                        v_x[s : s + rows] = g @ weights[0]
+        grads: list[Tensor | None] = [v_x, None]
         for w, b in zip(v_w, v_b, strict=True):
             grads += [w, b]
         return tuple(grads)
@@ -99,7 +149,8 @@ class FusedMLP(torch.autograd.Function):
 class ADE(nn.Module):
     """MLP of ``depth`` linear layers (ReLU between, Xavier-uniform weights, zero biases) mapping γ(x) and γ(poses)
     to ``n_moved`` × ``out_per_latent`` outputs per Gaussian (3 for displacements; 10 = 3 + 4 + 3 when rotations and
-    scales are predicted too)."""
+    scales are predicted too). ``matmul_dtype``: the dtype of :meth:`forward`'s matrix products (None: the
+    parameters'; ``torch.bfloat16``: mixed precision, see :class:`FusedMLP`); parameters stay float32."""
 
     def __init__(
         self,
@@ -110,8 +161,10 @@ class ADE(nn.Module):
         x_freqs: int = 4,
         pose_freqs: int = 4,
         out_per_latent: int = 3,
+        matmul_dtype: torch.dtype | None = None,
     ):
         super().__init__()
+        self.matmul_dtype = matmul_dtype  # FusedMLP's compute dtype (None: the parameters'; see compute_dtype)
         if depth < 2:
             raise ValueError(f"ADE depth must be >= 2 (input and output layers), got {depth}")
         self.x_freqs, self.pose_freqs = x_freqs, pose_freqs
@@ -142,7 +195,7 @@ class ADE(nn.Module):
         params: list[Tensor] = [self.first_x.weight, self.first_x.bias + self.first_pose(pose_input)]  # per-view bias
         for layer in [*self.hidden, self.last]:
             params += [layer.weight, layer.bias]
-        out = FusedMLP.apply(frequency_encoding(x, self.x_freqs), *params)
+        out = FusedMLP.apply(frequency_encoding(x, self.x_freqs), self.matmul_dtype, *params)
         return out.reshape(x.shape[0], self.n_moved, self.out_per_latent)
 
     def forward_reference(self, x: Tensor, pose_input: Tensor) -> Tensor:

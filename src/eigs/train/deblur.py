@@ -26,7 +26,7 @@ from eigs.losses.events import (
     luma,
     to_linear,
 )
-from eigs.train.ade import ADE
+from eigs.train.ade import ADE, PRECISIONS, compute_dtype
 from eigs.train.config import TrainConfig
 from eigs.train.data import TrainData
 from eigs.train.event_inputs import EventInputs
@@ -55,6 +55,10 @@ COMMON_OPTIONS: dict[str, Any] = {
     "x_freqs": 4,
     "pose_freqs": 4,
     "lr_ade": 1e-3,
+    # dtype of the ADE's matrix products: "float32", "bfloat16" (mixed precision: float32 parameters, Adam and
+    # outputs; bfloat16 products and kept activations) or "auto" (bfloat16 where the hardware multiplies it
+    # natively: AMX / AVX512-BF16 CPUs, bf16 GPUs; float32 elsewhere). docs/training.md "ADE precision"
+    "ade_precision": "auto",
     "pose_prior": False,  # beyond the paper: ADE predicts the residual to the displacement the latent poses imply
     "subframes": 1,  # beyond the paper: renders per latent interval (> 1 adds interpolated displacements)
     "blur_weights": "uniform",  # "uniform" (Eq. 2) or "trapezoid" (the exposure integral by the trapezoid rule)
@@ -98,6 +102,8 @@ class MultiRender(Method):
             raise EigsError(f"method {self.name}", f"event_loss must be eigs, e2nerf or none, got {o['event_loss']!r}")
         if (o["consistency"] or o["shape"] or o["pose_prior"] or int(o["subframes"]) != 1) and not o["ade"]:
             raise EigsError(f"method {self.name}", "consistency, shape, pose_prior, subframes need the ADE (ade: true)")
+        if o["ade_precision"] not in PRECISIONS:
+            raise EigsError(f"method {self.name}", f"ade_precision must be one of {', '.join(PRECISIONS)}")
         if float(o["event_deadzone"]) < 0 or float(o["event_mismatch"]) < 0:
             raise EigsError(f"method {self.name}", "event_deadzone and event_mismatch must be >= 0")
         if int(o["subframes"]) < 1 or o["blur_weights"] not in ("uniform", "trapezoid"):
@@ -134,6 +140,7 @@ class MultiRender(Method):
                 x_freqs=int(o["x_freqs"]),
                 pose_freqs=int(o["pose_freqs"]),
                 out_per_latent=10 if o["shape"] else 3,
+                matmul_dtype=compute_dtype(str(o["ade_precision"]), device),
             ).to(device)
             if o["ade_zero_last"]:
                 with torch.no_grad():
