@@ -3,7 +3,9 @@ every method, the schedule on 1, 2 and 8 cores simulated from the per-job times 
 training run ended within 0.3 dB of the best held-out PSNR it reached, and the tables. Writes docs/suite.md.
 
 Per-job times are Snakemake's benchmark files (``DIR/benchmarks/<rule>/<name>.tsv``): ``wall s`` as measured and
-``CPU s`` (CPU seconds per thread: what the job takes alone, when other work shared the cores during the run).
+``CPU s`` (CPU seconds per thread: what the job takes alone, when other work shared the cores during the run; the wall
+time for a job that ended before Snakemake's first sample, NA). DIR may be the ledger of bench/suite_ledger.py
+(``docs/suite``: the jobs of several sessions), whose tables are in ``DIR/tables/``.
 
 Run: ``.venv/bin/python bench/suite_report.py --directory DIR [--config config/config.yaml] [--out docs/suite.md]``
 """
@@ -20,10 +22,13 @@ import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench._report import machine, table  # noqa: E402
-from bench.schedule import job_time, jobs_of, simulate  # noqa: E402
+from bench.schedule import jobs_of, simulate  # noqa: E402
+from bench.suite_ledger import LedgerError, job_time  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 TOLERANCE_DB = 0.3
+# jobs a ledger cannot measure: they read every run's outputs, which no session of the ledger holds at once
+UNMEASURED = {"tables", "figures"}
 
 
 def curve(directory: Path, scene: str, bins: int, run: str) -> list[tuple[int, float]]:
@@ -42,7 +47,10 @@ def main() -> None:
     args = ap.parse_args()
     cfg = yaml.safe_load(args.config.read_text())
     jobs = jobs_of(cfg)
-    times = {j: job_time(args.directory, jobs[j][0], jobs[j][2]) for j in jobs}
+    try:
+        times = {j: job_time(args.directory, jobs[j][0], jobs[j][2]) for j in jobs}
+    except LedgerError as err:
+        raise SystemExit(f"suite_report.py: error: {err}") from None
     done = {j: t for j, t in times.items() if t is not None}
     missing = sorted(j for j in jobs if j not in done)
 
@@ -101,15 +109,17 @@ def main() -> None:
         ),  # fmt: skip
         "",
     ]
-    if not missing:
-        cpu_times = {j: t[1] for j, t in done.items()}
+    if set(missing) <= UNMEASURED:
+        cpu_times = {j: t[1] for j, t in done.items()} | {j: 0.0 for j in missing}
         sched = [[c, f"{simulate(jobs, cpu_times, c) / 3600:.2f}"] for c in (1, 2, 8)]
         md += ["## Schedule\n", "`snakemake --cores N all` simulated from the per-job CPU times (bench/schedule.py: a "
-               "job starts when its inputs exist and its threads are free, longest remaining path first).\n",
+               "job starts when its inputs exist and its threads are free, longest remaining path first)"
+               + (f"; {' and '.join(missing)} not measured, counted as 0 s" if missing else "") + ".\n",
                table(["cores", "hours"], sched), ""]  # fmt: skip
-    tables = args.directory / "results" / "tables" / "tables.md"
-    if tables.exists():
-        md += ["## Tables\n", tables.read_text()]
+    for tables in (args.directory / "results" / "tables" / "tables.md", args.directory / "tables" / "tables.md"):
+        if tables.exists():
+            md += ["## Tables\n", tables.read_text()]
+            break
     args.out.write_text("\n".join(md) + "\n")
     print(f"wrote {args.out}: {len(done)} of {len(jobs)} jobs")
 

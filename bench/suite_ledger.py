@@ -1,0 +1,439 @@
+"""Measure the default suite across work sessions: a ledger folder in git (default ``docs/suite``) that mirrors a
+workflow directory's small outputs, so that each session runs the jobs still missing and saves what they measured.
+
+The ledger holds, per job of the config's ``all`` DAG (``bench.schedule.jobs_of``) that finished in a workflow
+directory: its Snakemake benchmark file (``benchmarks/<rule>/<name>.tsv``); for a training job the run folder's
+``config.json`` and ``train_log.csv`` (never the model); for an evaluation job ``metrics.json``, ``per_image.csv``
+and the one view the qualitative grid shows (``renders/<set>/<image>`` and its ground truth
+``renders/gt_<set>/<image>``, chosen by ``eigs.tables.figures.grid_view``); and one provenance row in ``jobs.csv``
+(job, benchmark, wall s, CPU s (the benchmark's ``cpu_time``: all threads, empty when Snakemake wrote NA), threads,
+machine, commit, date (when the job finished: its benchmark file's time, UTC)). A job is in the ledger when its
+benchmark file is there (written last) with its files.
+
+``bench/suite_report.py --directory LEDGER`` and ``bench/schedule.py --directory LEDGER`` read it as a run;
+``tables`` writes Tables I-V (``eigs tables``) to ``LEDGER/tables/`` and the time-versus-PSNR curves and the Pareto
+plot to ``LEDGER/figures/``. The qualitative grids are not drawn: beside the renders kept here they read the blurry
+input from the scene file (``results/<scene>/scene.h5``), which the ledger does not keep.
+
+Run (docs/development.md, "Measuring the default suite across sessions"):
+``.venv/bin/snakemake --cores 2 $(.venv/bin/python bench/suite_ledger.py missing)``, then
+``.venv/bin/python bench/suite_ledger.py save --directory .``, commit the ledger;
+``.venv/bin/python bench/suite_ledger.py missing --count``; ``.venv/bin/python bench/suite_ledger.py tables``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import datetime as _dt
+import io
+import json
+import math
+import os
+import shlex
+import shutil
+import subprocess
+import sys
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import yaml
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from bench.schedule import jobs_of  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[1]
+DEFAULT_LEDGER = REPO / "docs" / "suite"
+JOBS_CSV = "jobs.csv"
+JOBS_COLUMNS = ("job", "benchmark", "wall_s", "cpu_s", "threads", "machine", "commit", "date")
+TABLES_HELPERS = REPO / "rules" / "common_tables.smk"
+RUN_FILES = ("config.json", "train_log.csv")  # a run folder's small files (the model is not kept)
+EVAL_FILES = ("metrics.json", "per_image.csv")
+MODEL_FILES = ("model.ply", "model.npz")  # one of them marks a finished run folder
+MAX_RENDER_KB = 256
+
+
+class LedgerError(Exception):
+    """A user-facing problem, printed on one line (``PATH: problem``) without a traceback."""
+
+
+@dataclass(frozen=True)
+class Job:
+    """One job of the ``all`` DAG: ``id`` as in bench.schedule (``train:chair:eigs+``), ``bench`` its benchmark name
+    (``train/chair_b4_eigs+``), ``rule`` the job id's first part; ``scene``, ``run``, ``bins`` for train/evaluate."""
+
+    id: str
+    bench: str
+    threads: int
+    rule: str
+    scene: str = ""
+    run: str = ""
+    bins: int = 0
+
+    @property
+    def benchmark(self) -> str:
+        return f"benchmarks/{self.bench}.tsv"
+
+    @property
+    def folder(self) -> str:
+        """The run folder (train) or evaluation folder (evaluate), relative to a workflow directory."""
+        if self.rule == "train":
+            return f"results/{self.scene}/b{self.bins}/{self.run}"
+        if self.rule == "evaluate":
+            return f"results/{self.scene}/b{self.bins}/eval/{self.run}"
+        return ""
+
+    @property
+    def files(self) -> list[str]:
+        """The small output files the ledger keeps (besides the benchmark and the grid's renders)."""
+        names = RUN_FILES if self.rule == "train" else EVAL_FILES if self.rule == "evaluate" else ()
+        return [f"{self.folder}/{n}" for n in names]
+
+    @property
+    def target(self) -> str:
+        """A Snakemake target that runs this job: the run's config.json (an output of rule train and of rule
+        train_field alike) or the evaluation's metrics.json."""
+        return self.files[0]
+
+
+def load_config(path: Path) -> dict:
+    try:
+        cfg = yaml.safe_load(Path(path).read_text())
+    except (OSError, yaml.YAMLError) as err:
+        raise LedgerError(f"{path}: cannot read the config ({str(err).splitlines()[0]})") from None
+    if not isinstance(cfg, dict) or not isinstance(cfg.get("scenes"), dict):
+        raise LedgerError(f"{path}: not a workflow config (no `scenes:`)")
+    return cfg
+
+
+def suite_jobs(cfg: dict) -> list[Job]:
+    """Every job of ``cfg``'s ``all`` target, in bench.schedule.jobs_of's (stable) order."""
+    out = []
+    for jid, (name, _deps, threads) in jobs_of(cfg).items():
+        rule = jid.split(":", 1)[0]
+        if rule in ("train", "evaluate"):
+            _, scene, run = jid.split(":", 2)
+            # jobs_of names them <rule>/<scene>_b<B>_<run>: B as the schedule resolved it
+            bins = int(name.split("/", 1)[1][len(scene) + 2 : -(len(run) + 1)])
+            out.append(Job(jid, name, threads, rule, scene, run, bins))
+        else:
+            out.append(Job(jid, name, threads, rule))
+    return out
+
+
+def read_benchmark(path: Path) -> tuple[float, float | None]:
+    """(wall s, CPU s of all threads) of a Snakemake benchmark file (its last row); CPU None when Snakemake wrote NA
+    (a job that ended before its first sample). A missing or malformed file is a LedgerError naming it."""
+    try:
+        text = Path(path).read_text()
+    except OSError as err:
+        raise LedgerError(f"{path}: cannot read the benchmark file ({err.strerror or err})") from None
+    try:
+        rows = list(csv.DictReader(io.StringIO(text), delimiter="\t"))
+    except csv.Error as err:
+        raise LedgerError(f"{path}: not a Snakemake benchmark file ({err})") from None
+    if not rows:
+        raise LedgerError(f"{path}: not a Snakemake benchmark file (no header and row)")
+    row = rows[-1]
+    if "s" not in row or "cpu_time" not in row:
+        raise LedgerError(f"{path}: not a Snakemake benchmark file (no `s` and `cpu_time` columns)")
+    try:
+        wall = float(row["s"])
+        cpu = None if (row["cpu_time"] or "").strip() == "NA" else float(row["cpu_time"])
+    except (TypeError, ValueError):
+        raise LedgerError(f"{path}: not a Snakemake benchmark file (s = {row['s']!r}, "
+                          f"cpu_time = {row['cpu_time']!r})") from None  # fmt: skip
+    if not math.isfinite(wall) or wall < 0 or (cpu is not None and (not math.isfinite(cpu) or cpu < 0)):
+        raise LedgerError(f"{path}: benchmark times out of range (s = {row['s']}, cpu_time = {row['cpu_time']})")
+    return wall, cpu
+
+
+def job_time(directory: Path, name: str, threads: int) -> tuple[float, float] | None:
+    """(wall s, CPU s per thread) of one job as bench.schedule.job_time gives it, or None when it has not run; an
+    NA CPU time counts as the wall time, a malformed file is a LedgerError naming it."""
+    p = Path(directory) / "benchmarks" / f"{name}.tsv"
+    if not p.exists():
+        return None
+    wall, cpu = read_benchmark(p)
+    return wall, (wall if cpu is None else cpu / max(threads, 1))
+
+
+def finished(directory: Path, job: Job) -> bool:
+    """Whether ``job`` finished in the workflow directory: its benchmark file and (train, evaluate) its outputs."""
+    d = Path(directory)
+    if not (d / job.benchmark).is_file():
+        return False
+    if not all((d / f).is_file() for f in job.files):
+        return False
+    return job.rule != "train" or any((d / job.folder / m).is_file() for m in MODEL_FILES)
+
+
+def outputs_without_benchmark(directory: Path, job: Job) -> bool:
+    d = Path(directory)
+    return bool(job.files) and not (d / job.benchmark).exists() and all((d / f).is_file() for f in job.files)
+
+
+def in_ledger(ledger: Path, job: Job) -> bool:
+    """A job is in the ledger when its benchmark file (written last) and its small files are."""
+    return (ledger / job.benchmark).is_file() and all((ledger / f).is_file() for f in job.files)
+
+
+def grid_renders(eval_dir: Path) -> list[str]:
+    """The renders of an evaluation folder that the qualitative grid reads (relative to it): the view
+    eigs.tables.figures.grid_view picks, rendered and (scenes with ground truth) its ground truth."""
+    from eigs.errors import EigsError
+    from eigs.tables.collect import read_metrics
+    from eigs.tables.figures import grid_view
+
+    try:
+        kind, image, _view = grid_view(read_metrics(eval_dir / "metrics.json"), eval_dir)
+    except (EigsError, OSError, KeyError, ValueError):
+        return []
+    return [f"renders/{k}/{image}" for k in (kind, f"gt_{kind}") if (eval_dir / "renders" / k / image).is_file()]
+
+
+def _copy(src: Path, dst: Path) -> None:
+    from eigs.util.atomic import atomic_path
+
+    with atomic_path(dst) as tmp:
+        shutil.copyfile(src, tmp)
+
+
+def read_jobs_csv(ledger: Path) -> list[dict[str, str]]:
+    p = ledger / JOBS_CSV
+    if not p.exists():
+        return []
+    try:
+        rows = list(csv.DictReader(p.open(newline="")))
+    except (OSError, csv.Error) as err:
+        raise LedgerError(f"{p}: cannot read the provenance table ({err})") from None
+    if rows and "job" not in rows[0]:
+        raise LedgerError(f"{p}: not a ledger provenance table (no `job` column)")
+    return rows
+
+
+def write_jobs_csv(ledger: Path, rows: list[dict[str, str]]) -> None:
+    from eigs.util.atomic import atomic_path
+
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=JOBS_COLUMNS, extrasaction="ignore", lineterminator="\n")
+    w.writeheader()
+    w.writerows(rows)
+    with atomic_path(ledger / JOBS_CSV) as tmp:
+        tmp.write_text(buf.getvalue())
+
+
+def repo_commit() -> str:
+    try:
+        out = subprocess.run(["git", "-C", str(REPO), "rev-parse", "HEAD"], capture_output=True, text=True, check=True)
+    except (OSError, subprocess.CalledProcessError):
+        return ""
+    return out.stdout.strip()
+
+
+def _machine() -> str:
+    from bench._report import machine
+
+    return machine()
+
+
+def save(
+    directory: Path,
+    cfg: dict,
+    ledger: Path,
+    *,
+    commit: str | None = None,
+    replace_present: bool = False,
+    max_render_kb: float = MAX_RENDER_KB,
+    machine: str | None = None,
+) -> tuple[list[str], list[str]]:
+    """Copy the jobs of ``cfg`` that finished in ``directory`` into ``ledger``. Returns (lines saved, lines skipped).
+
+    Every benchmark and metrics file to be copied is checked first, so a malformed one stops the command before it
+    writes anything. Per job: its small files, then its jobs.csv row, then its benchmark file (so an interrupted
+    save leaves the job missing, not half there)."""
+    from eigs.errors import EigsError
+    from eigs.tables.collect import read_metrics
+
+    directory, ledger = Path(directory), Path(ledger)
+    if not directory.is_dir():
+        raise LedgerError(f"{directory}: no such workflow directory")
+    todo: list[tuple[Job, float, float | None]] = []
+    skipped: list[str] = []
+    for job in suite_jobs(cfg):
+        present = in_ledger(ledger, job)
+        if present and not replace_present:
+            if finished(directory, job):
+                skipped.append(f"{job.id}: in the ledger already (--replace to take this run's)")
+            continue
+        if not finished(directory, job):
+            if outputs_without_benchmark(directory, job):
+                skipped.append(f"{job.id}: outputs but no benchmark file {directory / job.benchmark}")
+            continue
+        wall, cpu = read_benchmark(directory / job.benchmark)
+        if job.rule == "evaluate":
+            try:
+                read_metrics(directory / job.files[0])
+            except EigsError as err:
+                raise LedgerError(str(err)) from None
+        todo.append((job, wall, cpu))
+    if not todo:
+        return [], skipped
+    machine = _machine() if machine is None else machine
+    commit = commit if commit is not None else repo_commit()
+    rows = read_jobs_csv(ledger)
+    saved: list[str] = []
+    for job, wall, cpu in todo:
+        files = list(job.files)
+        if job.rule == "evaluate":
+            if replace_present and (ledger / job.folder / "renders").exists():
+                shutil.rmtree(ledger / job.folder / "renders")
+            for r in grid_renders(directory / job.folder):
+                kb = (directory / job.folder / r).stat().st_size / 1024
+                if kb <= max_render_kb:
+                    files.append(f"{job.folder}/{r}")
+                else:
+                    skipped.append(f"{job.id}: render {r} not kept ({kb:.0f} KB > {max_render_kb:g} KB)")
+        for f in files:
+            _copy(directory / f, ledger / f)
+        finished_at = _dt.datetime.fromtimestamp((directory / job.benchmark).stat().st_mtime, _dt.UTC)
+        rows = [r for r in rows if r.get("job") != job.id]
+        rows.append({"job": job.id, "benchmark": job.bench, "wall_s": f"{wall:.2f}",
+                     "cpu_s": "" if cpu is None else f"{cpu:.2f}", "threads": str(job.threads), "machine": machine,
+                     "commit": commit, "date": finished_at.strftime("%Y-%m-%dT%H:%M:%SZ")})  # fmt: skip
+        write_jobs_csv(ledger, rows)
+        _copy(directory / job.benchmark, ledger / job.benchmark)
+        cpu_text = "CPU NA" if cpu is None else f"{cpu:.0f} s CPU"
+        saved.append(f"{job.id}: {wall:.0f} s wall, {cpu_text}, {len(files) + 1} file{'s' if files else ''}")
+    return saved, skipped
+
+
+def missing_jobs(cfg: dict, ledger: Path, rule: str | None = None) -> list[Job]:
+    """The train and evaluate jobs (only ``rule``'s, when given) not in the ledger, in jobs_of's order."""
+    rules = (rule,) if rule else ("train", "evaluate")
+    return [j for j in suite_jobs(cfg) if j.rule in rules and not in_ledger(Path(ledger), j)]
+
+
+def counts(cfg: dict, ledger: Path) -> dict[str, tuple[int, int]]:
+    """Rule → (jobs in the ledger, jobs missing), train and evaluate first, then the other rules."""
+    out: dict[str, list[int]] = {"train": [0, 0], "evaluate": [0, 0]}
+    for j in suite_jobs(cfg):
+        c = out.setdefault(j.rule, [0, 0])
+        c[0 if in_ledger(Path(ledger), j) else 1] += 1
+    return {k: (v[0], v[1]) for k, v in out.items()}
+
+
+def workflow_table_helpers(cfg: dict) -> dict:
+    """rules/common_tables.smk's helpers (plain Python), run on ``cfg`` as the workflow runs them, so the ledger's
+    tables use the row mapping rule tables passes (``tables_json()``) without a copy of that logic here."""
+    ns: dict = {"config": cfg, "RUNS": cfg.get("runs", {}) or {}, "json": json, "shlex": shlex}
+    try:
+        exec(compile(TABLES_HELPERS.read_text(), str(TABLES_HELPERS), "exec"), ns)
+    except Exception as err:  # a helper file that is no longer plain Python, or a config it rejects
+        raise LedgerError(
+            f"{TABLES_HELPERS}: cannot run its helpers on the config ({type(err).__name__}: {err})"
+        ) from None
+    return ns
+
+
+def tables(cfg: dict, ledger: Path) -> list[str]:
+    """Tables I-V of the ledger's evaluated runs (``eigs tables``, the workflow's row mapping) into LEDGER/tables/,
+    and the time-versus-PSNR curves and the Pareto plot (eigs.tables.figures) into LEDGER/figures/. Returns lines
+    saying what was written."""
+    from eigs.cli import main as eigs_main
+    from eigs.errors import EigsError
+    from eigs.tables.collect import summarise
+    from eigs.tables.figures import pareto_plot, time_curves
+    from eigs.util.atomic import atomic_path
+
+    ledger = Path(ledger)
+    evals = [j for j in suite_jobs(cfg) if j.rule == "evaluate" and in_ledger(ledger, j)]
+    if not evals:
+        raise LedgerError(f"{ledger}: no evaluated run in the ledger (run `save` after a session's jobs)")
+    metrics = [str(ledger / j.files[0]) for j in evals]
+    mapping = shlex.split(workflow_table_helpers(cfg)["tables_json"]())[0]
+    code = eigs_main(["tables", *metrics, "--tables", mapping, "-o", str(ledger / "tables")])
+    if code:
+        raise LedgerError(f"{ledger}: eigs tables failed (exit {code}; its error is above)")
+    lines = [f"{ledger / 'tables'}: Tables I-V from {len(metrics)} metrics files"]
+    try:
+        runs = summarise(metrics)
+    except EigsError as err:
+        raise LedgerError(str(err)) from None
+    # the metrics' run_dir is relative to the workflow directory: here, to the ledger
+    for s in runs.values():
+        for d in s.per_scene.values():
+            if not Path(d["run_dir"]).is_absolute():
+                d["run_dir"] = str(ledger / d["run_dir"])
+    logged = {}
+    for name, s in runs.items():  # curves of the runs whose train_log.csv is in the ledger
+        per = {k: d for k, d in s.per_scene.items() if (Path(d["run_dir"]) / "train_log.csv").is_file()}
+        if per:
+            logged[name] = replace(s, per_scene=per, scenes=sorted(per))
+    figures = ledger / "figures"
+    with atomic_path(figures / "curves.png") as tmp:
+        time_curves(logged, tmp)
+    with atomic_path(figures / "pareto.png") as tmp:
+        pareto_plot(runs, tmp)
+    n_logs = sum(len(s.scenes) for s in logged.values())
+    lines.append(f"{figures}: curves.png ({n_logs} training logs), pareto.png; no qualitative grids (they read "
+                 "the blurry input from results/<scene>/scene.h5, which the ledger does not keep)")  # fmt: skip
+    return lines
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    sub = ap.add_subparsers(dest="command", required=True)
+
+    def common(p: argparse.ArgumentParser) -> None:
+        p.add_argument("--config", type=Path, default=REPO / "config" / "config.yaml")
+        p.add_argument("--ledger", type=Path, default=DEFAULT_LEDGER, help="the ledger folder (default docs/suite)")
+
+    p = sub.add_parser("save", help="copy the jobs that finished in a workflow directory into the ledger")
+    p.add_argument("--directory", type=Path, required=True, help="the workflow directory of the session's run")
+    common(p)
+    p.add_argument("--commit", default=None, help="git commit of DIR's checkout (default: this repository's HEAD)")
+    p.add_argument("--replace", action="store_true", help="overwrite jobs that are in the ledger already")
+    p.add_argument("--max-render-kb", type=float, default=MAX_RENDER_KB,
+                   help=f"keep the qualitative grid's renders up to this size (default {MAX_RENDER_KB} KB "
+                   "each)")  # fmt: skip
+    p = sub.add_parser("missing", help="the Snakemake targets of the train/evaluate jobs not in the ledger")
+    common(p)
+    p.add_argument("--rule", choices=("train", "evaluate"), default=None)
+    p.add_argument("--count", action="store_true", help="jobs in the ledger and missing, per rule, instead")
+    p = sub.add_parser("tables", help="Tables I-V (LEDGER/tables/) and the curves and Pareto plot (LEDGER/figures/)")
+    common(p)
+    args = ap.parse_args(argv)
+    try:
+        cfg = load_config(args.config)
+        if args.command == "save":
+            saved, skipped = save(args.directory, cfg, args.ledger, commit=args.commit, replace_present=args.replace,
+                                  max_render_kb=args.max_render_kb)  # fmt: skip
+            for line in saved:
+                print(f"saved {line}")
+            for line in skipped:
+                print(f"skipped {line}")
+            print(f"{args.ledger}: saved {len(saved)} jobs, skipped {len(skipped)}")
+        elif args.command == "missing":
+            if args.count:
+                for rule, (done, miss) in counts(cfg, args.ledger).items():
+                    if args.rule is None or rule == args.rule:
+                        print(f"{rule}: {done} done, {miss} missing")
+            else:
+                targets = [job.target for job in missing_jobs(cfg, args.ledger, args.rule)]
+                try:
+                    sys.stdout.write("".join(f"{t}\n" for t in targets))
+                    sys.stdout.flush()
+                except BrokenPipeError:  # `missing | head -n N`: the rest is not wanted
+                    os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        else:
+            for line in tables(cfg, args.ledger):
+                print(line)
+    except LedgerError as err:
+        print(f"suite_ledger.py {args.command}: error: {err}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
