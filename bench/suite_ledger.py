@@ -30,7 +30,6 @@ import io
 import json
 import math
 import os
-import shlex
 import shutil
 import subprocess
 import sys
@@ -46,7 +45,6 @@ REPO = Path(__file__).resolve().parents[1]
 DEFAULT_LEDGER = REPO / "docs" / "suite"
 JOBS_CSV = "jobs.csv"
 JOBS_COLUMNS = ("job", "benchmark", "wall_s", "cpu_s", "threads", "machine", "commit", "date")
-TABLES_HELPERS = REPO / "rules" / "common_tables.smk"
 RUN_FILES = ("config.json", "train_log.csv")  # a run folder's small files (the model is not kept)
 EVAL_FILES = ("metrics.json", "per_image.csv")
 MODEL_FILES = ("model.ply", "model.npz")  # one of them marks a finished run folder
@@ -323,19 +321,6 @@ def counts(cfg: dict, ledger: Path) -> dict[str, tuple[int, int]]:
     return {k: (v[0], v[1]) for k, v in out.items()}
 
 
-def workflow_table_helpers(cfg: dict) -> dict:
-    """rules/common_tables.smk's helpers (plain Python), run on ``cfg`` as the workflow runs them, so the ledger's
-    tables use the row mapping rule tables passes (``tables_json()``) without a copy of that logic here."""
-    ns: dict = {"config": cfg, "RUNS": cfg.get("runs", {}) or {}, "json": json, "shlex": shlex}
-    try:
-        exec(compile(TABLES_HELPERS.read_text(), str(TABLES_HELPERS), "exec"), ns)
-    except Exception as err:  # a helper file that is no longer plain Python, or a config it rejects
-        raise LedgerError(
-            f"{TABLES_HELPERS}: cannot run its helpers on the config ({type(err).__name__}: {err})"
-        ) from None
-    return ns
-
-
 def tables(cfg: dict, ledger: Path) -> list[str]:
     """Tables I-V of the ledger's evaluated runs (``eigs tables``, the workflow's row mapping) into LEDGER/tables/,
     and the time-versus-PSNR curves and the Pareto plot (eigs.tables.figures) into LEDGER/figures/. Returns lines
@@ -344,6 +329,7 @@ def tables(cfg: dict, ledger: Path) -> list[str]:
     from eigs.errors import EigsError
     from eigs.tables.collect import summarise
     from eigs.tables.figures import pareto_plot, time_curves
+    from eigs.tables.rows import configured_rows
     from eigs.util.atomic import atomic_path
 
     ledger = Path(ledger)
@@ -351,7 +337,7 @@ def tables(cfg: dict, ledger: Path) -> list[str]:
     if not evals:
         raise LedgerError(f"{ledger}: no evaluated run in the ledger (run `save` after a session's jobs)")
     metrics = [str(ledger / j.files[0]) for j in evals]
-    mapping = shlex.split(workflow_table_helpers(cfg)["tables_json"]())[0]
+    mapping = json.dumps(configured_rows(cfg.get("tables"), cfg.get("runs", {}) or {}), separators=(",", ":"))
     code = eigs_main(["tables", *metrics, "--tables", mapping, "-o", str(ledger / "tables")])
     if code:
         raise LedgerError(f"{ledger}: eigs tables failed (exit {code}; its error is above)")

@@ -1,5 +1,5 @@
 # Helpers of rules/evaluate.smk and rules/tables.smk (evaluation, tables, figures); needs rules/common.smk.
-from eigs.tables.rows import table_rows
+from eigs.tables.rows import configured_rows, table_rows
 
 
 # --- evaluate -------------------------------------------------------------------------------------------------
@@ -25,9 +25,8 @@ TABLE_ROWS = table_rows(config.get("tables"))
 
 def tables_json():
     """The row mappings (defaults: eigs.tables.rows) restricted to configured runs (others -> null: paper values
-    only), shell-quoted JSON."""
-    t = TABLE_ROWS
-    values = {name: {row: (run if run in RUNS else None) for row, run in t[name].items()} for name in t}
+    only; eigs.tables.rows.configured_rows), shell-quoted JSON."""
+    values = configured_rows(config.get("tables"), RUNS)
     return shlex.quote(json.dumps(values, separators=(",", ":")))
 
 

@@ -15,6 +15,7 @@ import yaml
 
 from bench import schedule, suite_ledger, suite_report
 from eigs.evaluate.core import LPIPS_NET, SSIM_TABLE_MODE, per_image_csv
+from eigs.tables.rows import configured_rows
 from eigs.train.config import TrainConfig
 from eigs.util.image import write_png
 
@@ -225,9 +226,8 @@ def test_ledger_is_a_run_for_suite_report_and_eigs_tables(workflow, tmp_path, ca
     assert schedule.job_time(ledger, "sfm/beta_b4", 2) == (16.0, 7.5)  # bench/schedule.py reads it unchanged
     assert suite_report.job_time(ledger, "evaluate/beta_b4_3dgs", 1) == (4.0, 4.0)  # NA CPU: the wall time
     assert suite_report.job_time(ledger, "train/beta_b4_eigs", 1) is None
-    # Tables I-V with the workflow's row mapping (rules/common_tables.smk tables_json): configured runs only
-    helpers = suite_ledger.workflow_table_helpers(yaml.safe_load(cfg.read_text()))
-    mapping = json.loads(suite_ledger.shlex.split(helpers["tables_json"]())[0])
+    # Tables I-V with the workflow's row mapping (eigs.tables.rows.configured_rows, which rule tables passes)
+    mapping = configured_rows(None, yaml.safe_load(cfg.read_text())["runs"])
     assert mapping["table1"]["3dgs"] == "3dgs" and mapping["table1"]["eigs"] == "eigs"
     assert mapping["table1"]["e2gs"] is None and mapping["table2"]["ours"] is None  # eigs+ is not configured
     code, out, err = ledger_main("tables", "--config", cfg, "--ledger", ledger, capsys=capsys)

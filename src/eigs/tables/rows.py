@@ -5,6 +5,7 @@ shows the paper's values only, so adding a method is one ``runs:`` line under th
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from typing import Any
 
 DEFAULT_ROWS: dict[str, dict[str, str | None]] = {
@@ -43,3 +44,11 @@ def table_rows(overrides: dict[str, Any] | None = None) -> dict[str, dict[str, s
     for name, rows in (overrides or {}).items():
         out[name] = {str(k): (None if v is None else str(v)) for k, v in rows.items()}
     return out
+
+
+def configured_rows(overrides: dict[str, Any] | None, runs: Iterable[str]) -> dict[str, dict[str, str | None]]:
+    """:func:`table_rows` with every row whose run is not among ``runs`` (the config's ``runs:``) set to None: such a
+    row shows the paper's values only. This is the mapping ``eigs tables --tables`` takes (rule tables passes it)."""
+    have = set(runs)
+    return {name: {row: (run if run in have else None) for row, run in rows.items()}
+            for name, rows in table_rows(overrides).items()}  # fmt: skip
