@@ -147,3 +147,17 @@ def test_precision_option():
     assert ade_module.compute_dtype("auto", cpu) is (torch.bfloat16 if native else None)
     with pytest.raises(ValueError, match="float16"):
         ade_module.compute_dtype("float16", cpu)
+
+
+@pytest.mark.parametrize("n", [0, 1, 4097])
+def test_bfloat16_edge_sizes(n):
+    """No rows, one row, and one row past a bfloat16 block: float32 outputs and gradients, finite, the right shapes,
+    and the output within 1e-2 of the float32 network's largest entry."""
+    net, x, pose, v = make(3, 64, n, torch.float32)
+    ref, _ = grads(net, x, pose, v, fused=True)
+    net.matmul_dtype = torch.bfloat16
+    out, g = grads(net, x, pose, v, fused=True)
+    assert out.shape == (n, 4, 3) and out.dtype == torch.float32
+    assert all(t.dtype == torch.float32 and bool(torch.isfinite(t).all()) for t in g.values())
+    if n:
+        assert (out - ref).abs().max() <= 1e-2 * ref.abs().max()
