@@ -120,7 +120,7 @@ def emulated_bf16(net: ADE, x: torch.Tensor, pose: torch.Tensor, v: torch.Tensor
 def test_bfloat16_matches_its_float64_emulation_and_the_exact_output(depth, width, n):
     """Mixed precision (bfloat16 products, float32 parameters): the output and the parameter gradients equal a float64
     emulation of the same rounding points to 5e-3 (relative, norm: the kernel's float32 accumulation and the
-    block-wise rounding of weight-gradient partial sums), and the output is within 1e-2 of the exact float64 network's
+    block-wise rounding of weight-gradient partial sums), and the output is within 2e-2 of the exact float64 network's
     largest entry. The gradients are not compared with the exact network's: where bfloat16 rounding flips the sign
     of a pre-activation near zero, ReLU routes that unit's whole gradient differently (measured: 4-10 % in norm
     on these random networks), as in any bfloat16 training."""
@@ -132,7 +132,7 @@ def test_bfloat16_matches_its_float64_emulation_and_the_exact_output(depth, widt
     assert out.dtype == torch.float32 and all(t.dtype == torch.float32 for t in g.values())
     out_em, g_em = emulated_bf16(net, x.float(), pose.float(), v.float())
     assert (out.double() - out_em).norm() <= 5e-3 * out_em.norm()
-    assert (out.double() - out_exact).abs().max() <= 1e-2 * out_exact.abs().max()
+    assert (out.double() - out_exact).abs().max() <= 2e-2 * out_exact.abs().max()
     g.pop("first_pose.weight")  # the pose half of the first layer: its gradient is first_x.bias's (outer product)
     for name, ref in g_em.items():
         err = (g[name].double() - ref).norm() / ref.norm()
@@ -152,7 +152,7 @@ def test_precision_option():
 @pytest.mark.parametrize("n", [0, 1, 4097])
 def test_bfloat16_edge_sizes(n):
     """No rows, one row, and one row past a bfloat16 block: float32 outputs and gradients, finite, the right shapes,
-    and the output within 1e-2 of the float32 network's largest entry."""
+    and the output within 2e-2 of the float32 network's largest entry."""
     net, x, pose, v = make(3, 64, n, torch.float32)
     ref, _ = grads(net, x, pose, v, fused=True)
     net.matmul_dtype = torch.bfloat16
@@ -160,4 +160,4 @@ def test_bfloat16_edge_sizes(n):
     assert out.shape == (n, 4, 3) and out.dtype == torch.float32
     assert all(t.dtype == torch.float32 and bool(torch.isfinite(t).all()) for t in g.values())
     if n:
-        assert (out - ref).abs().max() <= 1e-2 * ref.abs().max()
+        assert (out - ref).abs().max() <= 2e-2 * ref.abs().max()

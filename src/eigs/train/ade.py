@@ -84,7 +84,7 @@ class FusedMLP(torch.autograd.Function):
     ``dtype``: the dtype of the matrix products and of the kept activations (None: ``x``'s own). With
     ``torch.bfloat16`` (mixed precision) the products accumulate in float32 inside the kernel and round their
     results to bfloat16 (8 significant bits); the output, ``v_x`` and the parameter gradients are returned in the
-    parameters' dtype, the weight gradients summed over blocks in it. Promised: relative error ≲ 1e-2 of the
+    parameters' dtype, the weight gradients summed over blocks in it. Promised: relative error ≤ 2e-2 of the
     largest entry (tests/train/test_ade.py measures it against float64)."""
 
     @staticmethod
