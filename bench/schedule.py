@@ -16,7 +16,6 @@ Run: ``.venv/bin/python bench/schedule.py --config config/toy.yaml --directory /
 from __future__ import annotations
 
 import argparse
-import csv
 import heapq
 from pathlib import Path
 
@@ -62,12 +61,14 @@ def jobs_of(cfg: dict) -> dict[str, tuple[str, list[str], int]]:
 
 
 def job_time(directory: Path, name: str, threads: int) -> tuple[float, float] | None:
-    """(wall s, CPU s per thread) of one job from its benchmark file, or None when it has not run."""
-    p = directory / "benchmarks" / f"{name}.tsv"
-    if not p.exists():
-        return None
-    row = list(csv.DictReader(p.open(), delimiter="\t"))[-1]
-    return float(row["s"]), float(row["cpu_time"]) / max(threads, 1)
+    """(wall s, CPU s per thread) of one job, or None when it has not run: bench.suite_ledger.job_time (a training
+    job's own CPU seconds where its run recorded them, NA CPU times as the wall time, malformed files named)."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run as a script: the repository root
+    from bench.suite_ledger import job_time as ledger_job_time  # suite_ledger imports this module
+
+    return ledger_job_time(directory, name, threads)
 
 
 def seconds(

@@ -30,6 +30,7 @@ import io
 import json
 import math
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -146,13 +147,35 @@ def read_benchmark(path: Path) -> tuple[float, float | None]:
     return wall, cpu
 
 
+TRAIN_BENCHMARK = re.compile(r"^train/(?P<scene>.+)_b(?P<bins>\d+)_(?P<run>[^_/]+)$")
+
+
+def process_cpu_seconds(directory: Path, name: str) -> float | None:
+    """A training job's own CPU seconds (``run.process_cpu_s`` of its config.json, written by runs since 2026-11-26),
+    or None (another rule, an older run, a missing or unreadable file)."""
+    m = TRAIN_BENCHMARK.match(name)
+    if m is None:
+        return None
+    p = Path(directory) / "results" / m["scene"] / f"b{m['bins']}" / m["run"] / "config.json"
+    try:
+        value = json.loads(p.read_text())["run"]["process_cpu_s"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    return float(value) if isinstance(value, (int, float)) and math.isfinite(value) and value >= 0 else None
+
+
 def job_time(directory: Path, name: str, threads: int) -> tuple[float, float] | None:
-    """(wall s, CPU s per thread) of one job as bench.schedule.job_time gives it, or None when it has not run; an
-    NA CPU time counts as the wall time, a malformed file is a LedgerError naming it."""
+    """(wall s, CPU s per thread) of one job, or None when it has not run. CPU seconds: a training job's own
+    (:func:`process_cpu_seconds`) where its run recorded them, else the benchmark file's (Snakemake samples CPU time
+    every 30 s after a job's first 30 and misses up to that much of its end); an NA CPU time counts as the wall
+    time; a malformed benchmark file is a LedgerError naming it."""
     p = Path(directory) / "benchmarks" / f"{name}.tsv"
     if not p.exists():
         return None
     wall, cpu = read_benchmark(p)
+    own = process_cpu_seconds(directory, name)
+    if own is not None:
+        cpu = own
     return wall, (wall if cpu is None else cpu / max(threads, 1))
 
 

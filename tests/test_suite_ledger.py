@@ -321,3 +321,21 @@ def test_read_benchmark_na_cpu_and_missing_file(tmp_path):
     with pytest.raises(suite_ledger.LedgerError) as exc:
         suite_ledger.read_benchmark(tmp_path / "nope.tsv")
     assert str(exc.value).startswith(f"{tmp_path / 'nope.tsv'}: cannot read the benchmark file")
+
+
+def test_job_time_prefers_a_training_runs_own_cpu_seconds(tmp_path):
+    """A run that recorded ``process_cpu_s`` gives its CPU seconds (the benchmark file's sampled CPU time misses up to
+    30 s of a job's end); without it, a damaged config or for other rules, the benchmark file's; per thread both."""
+    benchmark(tmp_path / "benchmarks" / "train" / "my_scene_b6_eigs+.tsv", 300.0, 250.0)
+    benchmark(tmp_path / "benchmarks" / "sfm" / "my_scene_b6.tsv", 50.0, 40.0)
+    run = tmp_path / "results" / "my_scene" / "b6" / "eigs+"
+    run.mkdir(parents=True)
+    assert suite_ledger.job_time(tmp_path, "train/my_scene_b6_eigs+", 1) == (300.0, 250.0)
+    (run / "config.json").write_text(json.dumps({"run": {"process_cpu_s": 280.5}}))
+    assert suite_ledger.job_time(tmp_path, "train/my_scene_b6_eigs+", 2) == (300.0, 140.25)
+    assert schedule.job_time(tmp_path, "train/my_scene_b6_eigs+", 1) == (300.0, 280.5)
+    assert suite_ledger.job_time(tmp_path, "sfm/my_scene_b6", 2) == (50.0, 20.0)
+    (run / "config.json").write_text('{"run": {"process_cpu_s": NaN}}')
+    assert suite_ledger.job_time(tmp_path, "train/my_scene_b6_eigs+", 1) == (300.0, 250.0)
+    (run / "config.json").write_text("{trunc")
+    assert suite_ledger.job_time(tmp_path, "train/my_scene_b6_eigs+", 1) == (300.0, 250.0)

@@ -60,6 +60,7 @@ def test_each_method_improves_held_out_psnr(data, tmp_path, method):
     assert int(rows[-1]["step"]) == STEPS and int(rows[-1]["n_voxels"]) == res.model.n_voxels
     doc = json.loads((run / "config.json").read_text())
     assert TrainConfig.from_dict(doc["train"]) == cfg and doc["run"]["model"] == "field"
+    assert doc["run"]["process_cpu_s"] > 0
     assert not partial_dir_of(run).exists()
     # the model file renders what training rendered
     field = read_field(run / FIELD_FILE)

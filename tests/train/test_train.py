@@ -49,6 +49,7 @@ def test_loss_falls_psnr_rises_outputs_reload(data, tmp_path):
     doc = json.loads((run / "config.json").read_text())
     assert TrainConfig.from_dict(doc["train"]) == cfg
     assert doc["run"]["n_gaussians"] == len(cloud)
+    assert doc["run"]["process_cpu_s"] > 0  # the job's own CPU seconds (bench/suite_ledger.py reads them)
     assert not partial_dir_of(run).exists()
 
 

@@ -16,6 +16,7 @@ import json
 import logging
 import math
 import platform
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -238,6 +239,10 @@ def write_field_run(tr: FieldTrainer, run_dir: Path, inputs: dict[str, str]) -> 
         "method_options": tr.method.options,
         "scene": tr.data.scene.name,
         "train_seconds": round(tr.wall, 3),
+        # CPU seconds of this process so far (all threads: data loading, training, writing; a resumed run counts
+        # its last process only): what the job costs alone on a shared machine (Snakemake's benchmark files
+        # sample CPU time every ~30 s and miss up to that much of a job's end)
+        "process_cpu_s": round(time.process_time(), 3),
         "skipped_steps": tr.skipped,
         "n_voxels": tr.model.n_voxels,
         "field": tr.opts.field,

@@ -367,6 +367,10 @@ def write_run(tr: Trainer, run_dir: Path, inputs: dict[str, str]) -> None:
         "n_samples": tr.method.n_samples(),
         "extent": tr.extent,
         "train_seconds": round(tr.wall, 3),
+        # CPU seconds of this process so far (all threads: data loading, training, writing; a resumed run counts
+        # its last process only): what the job costs alone on a shared machine (Snakemake's benchmark files
+        # sample CPU time every ~30 s and miss up to that much of a job's end)
+        "process_cpu_s": round(time.process_time(), 3),
         "skipped_steps": tr.skipped,
         "n_gaussians": len(tr.model),
         "final": tr.rows[-1] if tr.rows else {},
