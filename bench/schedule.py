@@ -16,7 +16,12 @@ Run: ``.venv/bin/python bench/schedule.py --config config/toy.yaml --directory /
 from __future__ import annotations
 
 import argparse
+import csv
 import heapq
+import io
+import json
+import math
+import re
 from pathlib import Path
 
 import yaml
@@ -60,15 +65,67 @@ def jobs_of(cfg: dict) -> dict[str, tuple[str, list[str], int]]:
     return jobs
 
 
+class LedgerError(Exception):
+    """A user-facing problem, printed on one line (``PATH: problem``) without a traceback."""
+
+
+def read_benchmark(path: Path) -> tuple[float, float | None]:
+    """(wall s, CPU s of all threads) of a Snakemake benchmark file (its last row); CPU None when Snakemake wrote NA
+    (a job that ended before its first sample). A missing or malformed file is a LedgerError naming it."""
+    try:
+        text = Path(path).read_text()
+    except OSError as err:
+        raise LedgerError(f"{path}: cannot read the benchmark file ({err.strerror or err})") from None
+    try:
+        rows = list(csv.DictReader(io.StringIO(text), delimiter="\t"))
+    except csv.Error as err:
+        raise LedgerError(f"{path}: not a Snakemake benchmark file ({err})") from None
+    if not rows:
+        raise LedgerError(f"{path}: not a Snakemake benchmark file (no header and row)")
+    row = rows[-1]
+    if "s" not in row or "cpu_time" not in row:
+        raise LedgerError(f"{path}: not a Snakemake benchmark file (no `s` and `cpu_time` columns)")
+    try:
+        wall = float(row["s"])
+        cpu = None if (row["cpu_time"] or "").strip() == "NA" else float(row["cpu_time"])
+    except (TypeError, ValueError):
+        raise LedgerError(f"{path}: not a Snakemake benchmark file (s = {row['s']!r}, "
+                          f"cpu_time = {row['cpu_time']!r})") from None  # fmt: skip
+    if not math.isfinite(wall) or wall < 0 or (cpu is not None and (not math.isfinite(cpu) or cpu < 0)):
+        raise LedgerError(f"{path}: benchmark times out of range (s = {row['s']}, cpu_time = {row['cpu_time']})")
+    return wall, cpu
+
+
+TRAIN_BENCHMARK = re.compile(r"^train/(?P<scene>.+)_b(?P<bins>\d+)_(?P<run>[^_/]+)$")
+
+
+def process_cpu_seconds(directory: Path, name: str) -> float | None:
+    """A training job's own CPU seconds (``run.process_cpu_s`` of its config.json, written by runs since 2026-11-26),
+    or None (another rule, an older run, a missing or unreadable file)."""
+    m = TRAIN_BENCHMARK.match(name)
+    if m is None:
+        return None
+    p = Path(directory) / "results" / m["scene"] / f"b{m['bins']}" / m["run"] / "config.json"
+    try:
+        value = json.loads(p.read_text())["run"]["process_cpu_s"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    return float(value) if isinstance(value, (int, float)) and math.isfinite(value) and value >= 0 else None
+
+
 def job_time(directory: Path, name: str, threads: int) -> tuple[float, float] | None:
-    """(wall s, CPU s per thread) of one job, or None when it has not run: bench.suite_ledger.job_time (a training
-    job's own CPU seconds where its run recorded them, NA CPU times as the wall time, malformed files named)."""
-    import sys
-
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run as a script: the repository root
-    from bench.suite_ledger import job_time as ledger_job_time  # suite_ledger imports this module
-
-    return ledger_job_time(directory, name, threads)
+    """(wall s, CPU s per thread) of one job, or None when it has not run. CPU seconds: a training job's own
+    (:func:`process_cpu_seconds`) where its run recorded them, else the benchmark file's (Snakemake samples CPU time
+    every 30 s after a job's first 30 and misses up to that much of its end); an NA CPU time counts as the wall
+    time; a malformed benchmark file is a LedgerError naming it."""
+    p = Path(directory) / "benchmarks" / f"{name}.tsv"
+    if not p.exists():
+        return None
+    wall, cpu = read_benchmark(p)
+    own = process_cpu_seconds(directory, name)
+    if own is not None:
+        cpu = own
+    return wall, (wall if cpu is None else cpu / max(threads, 1))
 
 
 def seconds(

@@ -28,9 +28,7 @@ import csv
 import datetime as _dt
 import io
 import json
-import math
 import os
-import re
 import shutil
 import subprocess
 import sys
@@ -40,7 +38,13 @@ from pathlib import Path
 import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from bench.schedule import jobs_of  # noqa: E402
+from bench.schedule import (  # noqa: E402, F401  (the benchmark readers live there; job_time re-exported)
+    LedgerError,
+    job_time,
+    jobs_of,
+    process_cpu_seconds,
+    read_benchmark,
+)
 
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT_LEDGER = REPO / "docs" / "suite"
@@ -50,10 +54,6 @@ RUN_FILES = ("config.json", "train_log.csv")  # a run folder's small files (the 
 EVAL_FILES = ("metrics.json", "per_image.csv")
 MODEL_FILES = ("model.ply", "model.npz")  # one of them marks a finished run folder
 MAX_RENDER_KB = 256
-
-
-class LedgerError(Exception):
-    """A user-facing problem, printed on one line (``PATH: problem``) without a traceback."""
 
 
 @dataclass(frozen=True)
@@ -118,65 +118,6 @@ def suite_jobs(cfg: dict) -> list[Job]:
         else:
             out.append(Job(jid, name, threads, rule))
     return out
-
-
-def read_benchmark(path: Path) -> tuple[float, float | None]:
-    """(wall s, CPU s of all threads) of a Snakemake benchmark file (its last row); CPU None when Snakemake wrote NA
-    (a job that ended before its first sample). A missing or malformed file is a LedgerError naming it."""
-    try:
-        text = Path(path).read_text()
-    except OSError as err:
-        raise LedgerError(f"{path}: cannot read the benchmark file ({err.strerror or err})") from None
-    try:
-        rows = list(csv.DictReader(io.StringIO(text), delimiter="\t"))
-    except csv.Error as err:
-        raise LedgerError(f"{path}: not a Snakemake benchmark file ({err})") from None
-    if not rows:
-        raise LedgerError(f"{path}: not a Snakemake benchmark file (no header and row)")
-    row = rows[-1]
-    if "s" not in row or "cpu_time" not in row:
-        raise LedgerError(f"{path}: not a Snakemake benchmark file (no `s` and `cpu_time` columns)")
-    try:
-        wall = float(row["s"])
-        cpu = None if (row["cpu_time"] or "").strip() == "NA" else float(row["cpu_time"])
-    except (TypeError, ValueError):
-        raise LedgerError(f"{path}: not a Snakemake benchmark file (s = {row['s']!r}, "
-                          f"cpu_time = {row['cpu_time']!r})") from None  # fmt: skip
-    if not math.isfinite(wall) or wall < 0 or (cpu is not None and (not math.isfinite(cpu) or cpu < 0)):
-        raise LedgerError(f"{path}: benchmark times out of range (s = {row['s']}, cpu_time = {row['cpu_time']})")
-    return wall, cpu
-
-
-TRAIN_BENCHMARK = re.compile(r"^train/(?P<scene>.+)_b(?P<bins>\d+)_(?P<run>[^_/]+)$")
-
-
-def process_cpu_seconds(directory: Path, name: str) -> float | None:
-    """A training job's own CPU seconds (``run.process_cpu_s`` of its config.json, written by runs since 2026-11-26),
-    or None (another rule, an older run, a missing or unreadable file)."""
-    m = TRAIN_BENCHMARK.match(name)
-    if m is None:
-        return None
-    p = Path(directory) / "results" / m["scene"] / f"b{m['bins']}" / m["run"] / "config.json"
-    try:
-        value = json.loads(p.read_text())["run"]["process_cpu_s"]
-    except (OSError, ValueError, KeyError, TypeError):
-        return None
-    return float(value) if isinstance(value, (int, float)) and math.isfinite(value) and value >= 0 else None
-
-
-def job_time(directory: Path, name: str, threads: int) -> tuple[float, float] | None:
-    """(wall s, CPU s per thread) of one job, or None when it has not run. CPU seconds: a training job's own
-    (:func:`process_cpu_seconds`) where its run recorded them, else the benchmark file's (Snakemake samples CPU time
-    every 30 s after a job's first 30 and misses up to that much of its end); an NA CPU time counts as the wall
-    time; a malformed benchmark file is a LedgerError naming it."""
-    p = Path(directory) / "benchmarks" / f"{name}.tsv"
-    if not p.exists():
-        return None
-    wall, cpu = read_benchmark(p)
-    own = process_cpu_seconds(directory, name)
-    if own is not None:
-        cpu = own
-    return wall, (wall if cpu is None else cpu / max(threads, 1))
 
 
 def finished(directory: Path, job: Job) -> bool:

@@ -22,8 +22,7 @@ import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench._report import machine, table  # noqa: E402
-from bench.schedule import jobs_of, simulate  # noqa: E402
-from bench.suite_ledger import LedgerError, job_time  # noqa: E402
+from bench.schedule import LedgerError, job_time, jobs_of, simulate  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 TOLERANCE_DB = 0.3
