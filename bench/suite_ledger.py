@@ -38,13 +38,7 @@ from pathlib import Path
 import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from bench.schedule import (  # noqa: E402, F401  (the benchmark readers live there; job_time re-exported)
-    LedgerError,
-    job_time,
-    jobs_of,
-    process_cpu_seconds,
-    read_benchmark,
-)
+from bench.schedule import LedgerError, jobs_of, read_benchmark  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT_LEDGER = REPO / "docs" / "suite"

@@ -315,11 +315,11 @@ def test_unreadable_config_and_metrics_are_one_line_errors(workflow, tmp_path, c
 def test_read_benchmark_na_cpu_and_missing_file(tmp_path):
     p = tmp_path / "benchmarks" / "tables.tsv"
     benchmark(p, 0.41, "NA")  # a job that ended before Snakemake's first sample
-    assert suite_ledger.read_benchmark(p) == (0.41, None)
-    assert suite_ledger.job_time(tmp_path, "tables", 1) == (0.41, 0.41)
-    assert suite_ledger.job_time(tmp_path, "figures", 1) is None  # not run
+    assert schedule.read_benchmark(p) == (0.41, None)
+    assert schedule.job_time(tmp_path, "tables", 1) == (0.41, 0.41)
+    assert schedule.job_time(tmp_path, "figures", 1) is None  # not run
     with pytest.raises(suite_ledger.LedgerError) as exc:
-        suite_ledger.read_benchmark(tmp_path / "nope.tsv")
+        schedule.read_benchmark(tmp_path / "nope.tsv")
     assert str(exc.value).startswith(f"{tmp_path / 'nope.tsv'}: cannot read the benchmark file")
 
 
@@ -330,12 +330,12 @@ def test_job_time_prefers_a_training_runs_own_cpu_seconds(tmp_path):
     benchmark(tmp_path / "benchmarks" / "sfm" / "my_scene_b6.tsv", 50.0, 40.0)
     run = tmp_path / "results" / "my_scene" / "b6" / "eigs+"
     run.mkdir(parents=True)
-    assert suite_ledger.job_time(tmp_path, "train/my_scene_b6_eigs+", 1) == (300.0, 250.0)
+    assert schedule.job_time(tmp_path, "train/my_scene_b6_eigs+", 1) == (300.0, 250.0)
     (run / "config.json").write_text(json.dumps({"run": {"process_cpu_s": 280.5}}))
-    assert suite_ledger.job_time(tmp_path, "train/my_scene_b6_eigs+", 2) == (300.0, 140.25)
+    assert schedule.job_time(tmp_path, "train/my_scene_b6_eigs+", 2) == (300.0, 140.25)
     assert schedule.job_time(tmp_path, "train/my_scene_b6_eigs+", 1) == (300.0, 280.5)
-    assert suite_ledger.job_time(tmp_path, "sfm/my_scene_b6", 2) == (50.0, 20.0)
+    assert schedule.job_time(tmp_path, "sfm/my_scene_b6", 2) == (50.0, 20.0)
     (run / "config.json").write_text('{"run": {"process_cpu_s": NaN}}')
-    assert suite_ledger.job_time(tmp_path, "train/my_scene_b6_eigs+", 1) == (300.0, 250.0)
+    assert schedule.job_time(tmp_path, "train/my_scene_b6_eigs+", 1) == (300.0, 250.0)
     (run / "config.json").write_text("{trunc")
-    assert suite_ledger.job_time(tmp_path, "train/my_scene_b6_eigs+", 1) == (300.0, 250.0)
+    assert schedule.job_time(tmp_path, "train/my_scene_b6_eigs+", 1) == (300.0, 250.0)
