@@ -250,7 +250,18 @@ def test_ledger_is_a_run_for_suite_report_and_eigs_tables(workflow, tmp_path, ca
     assert "14 of 19 jobs have run" in text
     # 3dgs: CPU s mean (250, 252), wall (300, 302), final PSNR (21.25, 20.5), largest gap 0.25 (alpha)
     assert "| 3dgs | 3dgs | 20 | 2 | 251 | 301 | 20.88 | 0.25 | yes |" in text
-    assert "## Tables" in text and "## Schedule" not in text
+    assert "## Tables" in text and "## Schedule" not in text and "## Plateau references" not in text
+    # plateau references (bench/plateau_reference.py): the suite run's final PSNR against the longer run's best
+    for scene, ref in (("alpha", [(0, 18.0), (20, 21.0), (40, 21.7), (60, 21.6)]), ("beta", [(20, 20.6), (40, 20.1)])):
+        log = ledger / "plateau" / f"{scene}_b4_3dgs" / "train_log.csv"
+        log.parent.mkdir(parents=True)
+        log.write_text("step,loss,psnr_novel\n" + "".join(f"{st},0.1,{p}\n{st + 5},0.1,\n" for st, p in ref))
+    assert suite_report.reference_curve(ledger, "beta", 4, "3dgs") == [(20, 20.6), (40, 20.1)]
+    suite_report.main()
+    text = report.read_text()
+    # alpha: final 21.25, reference best 21.7 at step 40: short by 0.45; beta: final 20.5, best 20.6: 0.10
+    assert "| 3dgs | alpha | 20 | 21.25 | 60 | 21.70 (40) | 21.60 | +0.45 | **no** |" in text
+    assert "| 3dgs | beta | 20 | 20.50 | 40 | 20.60 (20) | 20.10 | +0.10 | yes |" in text
 
 
 def test_schedule_of_a_complete_ledger_without_tables_and_figures_jobs(workflow, tmp_path, capsys, monkeypatch):
