@@ -134,6 +134,79 @@ def in_ledger(ledger: Path, job: Job) -> bool:
     return (ledger / job.benchmark).is_file() and all((ledger / f).is_file() for f in job.files)
 
 
+def expected_train(cfg: dict, run: str) -> dict:
+    """The ``train`` section of the config.json of a run trained with ``cfg``'s options for ``run``, as `eigs train`
+    resolves them (TrainConfig's defaults; a field method's own budget when the options set no ``steps``)."""
+    from eigs.train.cli import resolve_steps
+    from eigs.train.config import TrainConfig
+
+    spec = cfg["runs"][run]
+    given = {"method": spec["method"], **spec.get("options", {})}
+    values = TrainConfig.from_dict(given).to_dict()
+    values["steps"] = resolve_steps(values, given, None)
+    return values
+
+
+def option_changes(root: Path, cfg: dict, job: Job) -> str:
+    """How the run behind a train or evaluate ``job`` in ``root`` (a ledger or a workflow directory) differs from
+    ``cfg``'s options for it, e.g. ``steps 800 → 1200`` ("" when it does not, or when there is nothing to read)."""
+    if job.rule not in ("train", "evaluate"):
+        return ""
+    run_config = Path(root) / "results" / job.scene / f"b{job.bins}" / job.run / "config.json"
+    want = expected_train(cfg, job.run)
+    try:
+        if job.rule == "evaluate":
+            doc = json.loads((Path(root) / job.files[0]).read_text())
+            if "steps" in doc and doc["steps"] != want["steps"]:
+                return f"steps {doc['steps']} → {want['steps']}"
+        if not run_config.is_file():
+            return ""
+        have = json.loads(run_config.read_text())["train"]
+    except (OSError, ValueError, KeyError, TypeError) as err:
+        raise LedgerError(f"{run_config}: cannot read the run's options ({err})") from None
+    keys = sorted(k for k in set(want) | set(have) if want.get(k) != have.get(k))
+    return ", ".join(f"{k} {have.get(k)} → {want.get(k)}" for k in keys)
+
+
+def stale_jobs(cfg: dict, ledger: Path) -> dict[str, str]:
+    """Job id → change, for the train and evaluate jobs in the ledger whose run was trained with other options than
+    ``cfg`` gives it now (a budget changed); `prune` removes them."""
+    out = {}
+    for job in suite_jobs(cfg):
+        if in_ledger(Path(ledger), job):
+            change = option_changes(ledger, cfg, job)
+            if change:
+                out[job.id] = change
+    return out
+
+
+def check_current(cfg: dict, ledger: Path) -> None:
+    """Raise LedgerError when the ledger holds stale jobs (:func:`stale_jobs`): every command but `prune` reads the
+    ledger as a run of the config."""
+    stale = stale_jobs(cfg, ledger)
+    if stale:
+        first = next(iter(stale))
+        raise LedgerError(f"{ledger}: {len(stale)} jobs were run with other options than the config ({first}: "
+                          f"{stale[first]}): run `suite_ledger.py prune`, then the jobs `missing` lists")  # fmt: skip
+
+
+def prune(cfg: dict, ledger: Path) -> list[str]:
+    """Remove the stale jobs (:func:`stale_jobs`) from the ledger: their folder, benchmark file and jobs.csv row.
+    Returns a line per job removed."""
+    ledger = Path(ledger)
+    stale = stale_jobs(cfg, ledger)
+    jobs = {j.id: j for j in suite_jobs(cfg)}
+    lines = []
+    for jid, change in stale.items():
+        job = jobs[jid]
+        (ledger / job.benchmark).unlink()  # first: the job is out of the ledger even if the rest is interrupted
+        shutil.rmtree(ledger / job.folder)
+        lines.append(f"{jid}: removed ({change})")
+    if stale:
+        write_jobs_csv(ledger, [r for r in read_jobs_csv(ledger) if r.get("job") not in stale])
+    return lines
+
+
 def grid_renders(eval_dir: Path) -> list[str]:
     """The renders of an evaluation folder that the qualitative grid reads (relative to it): the view
     eigs.tables.figures.grid_view picks, rendered and (scenes with ground truth) its ground truth."""
@@ -225,6 +298,10 @@ def save(
         if not finished(directory, job):
             if outputs_without_benchmark(directory, job):
                 skipped.append(f"{job.id}: outputs but no benchmark file {directory / job.benchmark}")
+            continue
+        change = option_changes(directory, cfg, job)
+        if change:
+            skipped.append(f"{job.id}: trained with other options than the config ({change})")
             continue
         wall, cpu = read_benchmark(directory / job.benchmark)
         if job.rule == "evaluate":
@@ -347,9 +424,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--count", action="store_true", help="jobs in the ledger and missing, per rule, instead")
     p = sub.add_parser("tables", help="Tables I-V (LEDGER/tables/) and the curves and Pareto plot (LEDGER/figures/)")
     common(p)
+    p = sub.add_parser("prune", help="remove the jobs run with other options than the config (a budget changed)")
+    common(p)
     args = ap.parse_args(argv)
     try:
         cfg = load_config(args.config)
+        if args.command != "prune":
+            check_current(cfg, args.ledger)
         if args.command == "save":
             saved, skipped = save(args.directory, cfg, args.ledger, commit=args.commit, replace_present=args.replace,
                                   max_render_kb=args.max_render_kb)  # fmt: skip
@@ -370,6 +451,11 @@ def main(argv: list[str] | None = None) -> int:
                     sys.stdout.flush()
                 except BrokenPipeError:  # `missing | head -n N`: the rest is not wanted
                     os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        elif args.command == "prune":
+            lines = prune(cfg, args.ledger)
+            for line in lines:
+                print(line)
+            print(f"{args.ledger}: removed {len(lines)} jobs")
         else:
             for line in tables(cfg, args.ledger):
                 print(line)

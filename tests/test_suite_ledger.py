@@ -214,6 +214,38 @@ def test_missing_lists_exactly_the_unfinished_targets(workflow, tmp_path, capsys
     assert out.splitlines() == ["results/alpha/b4/3dgs/config.json", "results/beta/b4/eigs/config.json"]
 
 
+def test_a_changed_budget_makes_the_runs_stale_until_pruned_and_rerun(workflow, tmp_path, capsys):
+    cfg, d = workflow
+    ledger = tmp_path / "ledger"
+    common = ("--config", cfg, "--ledger", ledger)
+    assert ledger_main("save", "--directory", d, *common, capsys=capsys)[0] == 0
+    before = files_under(ledger)
+    changed = yaml.safe_load(cfg.read_text())
+    changed["runs"]["3dgs"]["options"]["steps"] = 30  # the ledger's 3dgs runs and evaluations have 20
+    cfg.write_text(yaml.safe_dump(changed))
+    stale = suite_ledger.stale_jobs(changed, ledger)
+    assert stale == {f"{rule}:{scene}:3dgs": "steps 20 → 30" for rule in ("train", "evaluate")
+                     for scene in ("alpha", "beta")}  # fmt: skip
+    for command in ("missing", "tables", "save"):  # every command but prune refuses a ledger with stale jobs
+        argv = (command, "--directory", d, *common) if command == "save" else (command, *common)
+        code, _, err = ledger_main(*argv, capsys=capsys)
+        assert code == 2 and "4 jobs were run with other options than the config" in err and "prune" in err
+    assert files_under(ledger) == before
+    code, out, _ = ledger_main("prune", *common, capsys=capsys)
+    assert code == 0 and "removed 4 jobs" in out and "train:alpha:3dgs: removed (steps 20 → 30)" in out
+    assert files_under(ledger) == sorted(f for f in before if "/3dgs/" not in f and "_3dgs" not in f)
+    jobs = [r["job"] for r in csv.DictReader((ledger / "jobs.csv").open())]
+    assert "train:alpha:eigs" in jobs and not [j for j in jobs if j.endswith(":3dgs")]
+    _, out, _ = ledger_main("missing", *common, "--rule", "train", capsys=capsys)
+    assert out.splitlines() == ["results/alpha/b4/3dgs/config.json", "results/beta/b4/3dgs/config.json",
+                                "results/beta/b4/eigs/config.json"]  # fmt: skip
+    # the workflow directory still holds the 20-step runs: save does not take them for the 30-step config
+    code, out, _ = ledger_main("save", "--directory", d, *common, capsys=capsys)
+    assert code == 0 and "skipped train:alpha:3dgs: trained with other options than the config (steps 20 → 30)" in out
+    assert "skipped evaluate:beta:3dgs: trained with other options than the config (steps 20 → 30)" in out
+    assert not (ledger / "results/alpha/b4/3dgs").exists()
+
+
 def test_ledger_is_a_run_for_suite_report_and_eigs_tables(workflow, tmp_path, capsys, monkeypatch):
     cfg, d = workflow
     ledger = tmp_path / "ledger"
