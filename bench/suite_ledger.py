@@ -152,15 +152,19 @@ def option_changes(root: Path, cfg: dict, job: Job) -> str:
     ``cfg``'s options for it, e.g. ``steps 800 → 1200`` ("" when it does not, or when there is nothing to read)."""
     if job.rule not in ("train", "evaluate"):
         return ""
-    run_config = Path(root) / "results" / job.scene / f"b{job.bins}" / job.run / "config.json"
     want = expected_train(cfg, job.run)
+    if job.rule == "evaluate":
+        metrics = Path(root) / job.files[0]
+        try:
+            steps = json.loads(metrics.read_text()).get("steps")
+        except (OSError, ValueError, AttributeError) as err:
+            raise LedgerError(f"{metrics}: cannot read the evaluation ({err})") from None
+        if steps is not None and steps != want["steps"]:
+            return f"steps {steps} → {want['steps']}"
+    run_config = Path(root) / "results" / job.scene / f"b{job.bins}" / job.run / "config.json"
+    if not run_config.is_file():
+        return ""
     try:
-        if job.rule == "evaluate":
-            doc = json.loads((Path(root) / job.files[0]).read_text())
-            if "steps" in doc and doc["steps"] != want["steps"]:
-                return f"steps {doc['steps']} → {want['steps']}"
-        if not run_config.is_file():
-            return ""
         have = json.loads(run_config.read_text())["train"]
     except (OSError, ValueError, KeyError, TypeError) as err:
         raise LedgerError(f"{run_config}: cannot read the run's options ({err})") from None

@@ -64,6 +64,8 @@ def eval_folder(d, scene, run):
     """metrics.json, per_image.csv and renders/ as eigs.evaluate.core.evaluate_run writes them (a scene with ground
     truth: blur views 0001, 0003 and novel view 0000)."""
     psnr = PSNR[(scene, run)]
+    spec = CONFIG["runs"][run]
+    steps = TrainConfig.from_dict({"method": spec["method"], **spec.get("options", {})}).steps
     rows = []
     rng = np.random.default_rng(len(scene) + len(run))
     for kind, image, view in (("blur", "0003.png", 3), ("blur", "0001.png", 1), ("novel", "0000.png", 0)):
@@ -76,7 +78,7 @@ def eval_folder(d, scene, run):
     doc = {"format": "eigs-metrics", "version": 1, "run_dir": f"results/{scene}/b4/{run}", "run": run,
            "method": CONFIG["runs"][run]["method"], "method_options": {}, "scene": scene, "bins": 4,
            "ground_truth": True, "ssim_table_mode": SSIM_TABLE_MODE, "lpips_net": LPIPS_NET,
-           "metrics": {"blur": {**group, "n": 2}, "novel": group}, "train_seconds": 100.0 + len(run), "steps": 20,
+           "metrics": {"blur": {**group, "n": 2}, "novel": group}, "train_seconds": 100.0 + len(run), "steps": steps,
            "n_gaussians": 900, "n_voxels": None, "fps": 40.0, "render_ms": 25.0, "frames_timed": 3, "device": "cpu",
            "width": 8, "height": 6, "test_cameras": {"spline": 3}, "path": None}  # fmt: skip
     (d / "per_image.csv").write_text(per_image_csv(rows))
