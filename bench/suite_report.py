@@ -50,11 +50,27 @@ def reference_curve(directory: Path, scene: str, bins: int, run: str) -> list[tu
     return read_curve(directory / "plateau" / f"{scene}_b{bins}_{run}" / "train_log.csv")
 
 
+BEGIN, END = "<!-- suite-report:begin -->", "<!-- suite-report:end -->"
+
+
+def splice(document: str, report: str, name: str = "README.md") -> str:
+    """``document`` with the text between its BEGIN and END markers replaced by ``report`` (its title dropped, its
+    sections one level down)."""
+    i, j = document.find(BEGIN), document.find(END)
+    if i < 0 or j < i:
+        raise ValueError(f"{name}: no `{BEGIN}` … `{END}` block to write the report into")
+    body = report.split("\n", 1)[1] if report.startswith("# ") else report
+    body = "\n".join("#" + line if line.startswith("## ") else line for line in body.strip("\n").split("\n"))
+    return document[: i + len(BEGIN)] + "\n\n" + body + "\n\n" + document[j:]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--directory", type=Path, required=True, help="the workflow directory of the run")
     ap.add_argument("--config", type=Path, default=REPO / "config" / "config.yaml")
     ap.add_argument("--out", type=Path, default=REPO / "docs" / "suite.md")
+    ap.add_argument("--readme", type=Path, default=None,
+                    help=f"also write the report into this file, between its {BEGIN} and {END} lines")  # fmt: skip
     args = ap.parse_args()
     cfg = yaml.safe_load(args.config.read_text())
     jobs = jobs_of(cfg)
@@ -145,7 +161,14 @@ def main() -> None:
         if tables.exists():
             md += ["## Tables\n", tables.read_text()]
             break
-    args.out.write_text("\n".join(md) + "\n")
+    report = "\n".join(md) + "\n"
+    if args.readme is not None:
+        try:
+            spliced = splice(args.readme.read_text(), report, str(args.readme))
+        except (OSError, ValueError) as err:
+            raise SystemExit(f"suite_report.py: error: {err}") from None
+        args.readme.write_text(spliced)
+    args.out.write_text(report)
     print(f"wrote {args.out}: {len(done)} of {len(jobs)} jobs")
 
 

@@ -298,6 +298,17 @@ def test_ledger_is_a_run_for_suite_report_and_eigs_tables(workflow, tmp_path, ca
     assert "| 3dgs | beta | 20 | 20.50 | 40 | 20.60 (20) | 20.10 | +0.10 | yes |" in text
 
 
+def test_report_spliced_into_a_readme_block():
+    doc = "# Project\n\nintro\n<!-- suite-report:begin -->\nold report\n<!-- suite-report:end -->\n\n## After\n"
+    report = "# The default suite, measured\n\nWritten by x.\n\n## Time per stage\n\n| a |\n|---|\n"
+    out = suite_report.splice(doc, report)
+    assert out == ("# Project\n\nintro\n<!-- suite-report:begin -->\n\nWritten by x.\n\n### Time per stage\n\n| a |\n"
+                   "|---|\n\n<!-- suite-report:end -->\n\n## After\n")  # fmt: skip
+    assert suite_report.splice(out, report) == out  # idempotent
+    with pytest.raises(ValueError, match="NOTES.md: no `<!-- suite-report:begin -->`"):
+        suite_report.splice("# Project\n", report, "NOTES.md")
+
+
 def test_schedule_of_a_complete_ledger_without_tables_and_figures_jobs(workflow, tmp_path, capsys, monkeypatch):
     cfg, d = workflow
     run_folder(d / "results/beta/b4/eigs", "beta", "eigs")
