@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import json
 import sys
 from collections import defaultdict
 from pathlib import Path
@@ -42,6 +43,15 @@ def read_curve(path: Path) -> list[tuple[int, float]]:
 def curve(directory: Path, scene: str, bins: int, run: str) -> list[tuple[int, float]]:
     """(step, held-out novel-view PSNR) of a finished run of the suite ([] when absent)."""
     return read_curve(directory / "results" / scene / f"b{bins}" / run / "train_log.csv")
+
+
+def trained_steps(directory: Path, scene: str, bins: int, run: str) -> int:
+    """The step count a finished run of the suite trained (its config.json)."""
+    p = directory / "results" / scene / f"b{bins}" / run / "config.json"
+    try:
+        return int(json.loads(p.read_text())["train"]["steps"])
+    except (OSError, ValueError, KeyError, TypeError) as err:
+        raise SystemExit(f"suite_report.py: error: {p}: cannot read the run's steps ({err})") from None
 
 
 def reference_curve(directory: Path, scene: str, bins: int, run: str) -> list[tuple[int, float]]:
@@ -92,6 +102,7 @@ def main() -> None:
     # time and plateau check per method
     bins_default = int(cfg.get("edi", {}).get("bins", [4])[0])
     per_run: dict[str, list[tuple[float, float, float, float]]] = defaultdict(list)
+    run_steps: dict[str, set[int]] = defaultdict(set)
     ref_rows = []
     for j, t in sorted(done.items()):
         if not j.startswith("train:"):
@@ -102,6 +113,7 @@ def main() -> None:
         if c:
             best = max(p for _, p in c)
             per_run[run].append((t[0], t[1], c[-1][1], best - c[-1][1]))
+            run_steps[run].add(trained_steps(args.directory, scene, bins, run))
         ref = reference_curve(args.directory, scene, bins, run)
         if c and ref:
             ref_step, ref_best = max(ref, key=lambda sp: (sp[1], -sp[0]))
@@ -111,9 +123,9 @@ def main() -> None:
                              f"{ref[-1][1]:.2f}", f"{short:+.2f}", verdict])  # fmt: skip
     run_rows = []
     for run, vals in sorted(per_run.items(), key=lambda kv: -sum(v[1] for v in kv[1])):
-        opts = cfg["runs"][run].get("options", {})
+        steps = sorted(run_steps[run])  # as trained (a field method's own default when the options set none)
         worst = max(v[3] for v in vals)
-        run_rows.append([run, cfg["runs"][run]["method"], opts.get("steps", "default"), len(vals),
+        run_rows.append([run, cfg["runs"][run]["method"], "/".join(map(str, steps)), len(vals),
                          f"{sum(v[1] for v in vals) / len(vals):.0f}", f"{sum(v[0] for v in vals) / len(vals):.0f}",
                          f"{sum(v[2] for v in vals) / len(vals):.2f}", f"{worst:.2f}",
                          "yes" if worst <= TOLERANCE_DB else "**no**"])  # fmt: skip
