@@ -257,19 +257,31 @@ def test_damaged_checkpoints_are_ignored_or_resume_finite(originals, fresh_param
         assert torch.isfinite(v).all()
 
 
-@pytest.mark.parametrize("damage_kind", ["renamed key", "wrong shape"])
+@pytest.mark.parametrize(
+    "damage_kind", ["renamed key", "wrong shape", "negative second moment", "zero step", "zero eps", "beta of 1"]
+)
 def test_checkpoint_with_damaged_adam_state_is_ignored(originals, fresh_params, tmp_path_factory, caplog, damage_kind):
-    """Regression (found by the fuzz test above): a flipped byte renamed an Adam moment's key in the pickle
-    ('exp_avg' → another name), the checkpoint loaded, and the first optimiser step after resuming raised KeyError.
-    The Adam state is now checked (its keys, and moments of the parameter's shape) before resuming."""
+    """Regressions (found by the fuzz test above): a flipped byte renamed an Adam moment's key in the pickle
+    ('exp_avg' → another name), the checkpoint loaded, and the first optimiser step after resuming raised KeyError;
+    a flipped sign bit made an exp_avg_sq entry negative (-1.9e-9), and the first step wrote NaN into the parameter
+    (Adam divides by its square root). The Adam state is now checked (its keys, moments of the parameter's shape,
+    exp_avg_sq ≥ 0, step ≥ 1, and the groups' lr, eps, betas) before resuming."""
     fname, raw = originals["checkpoint"]
     state = torch.load(__import__("io").BytesIO(raw), weights_only=False)
     entry = state["optimizer"]["state"][0]
     if damage_kind == "renamed key":
         entry["exp_avc"] = entry.pop("exp_avg")
-    else:
+    elif damage_kind == "wrong shape":
         entry["exp_avg"] = entry["exp_avg"][:-1]
         entry["exp_avg_sq"] = entry["exp_avg_sq"][:-1]
+    elif damage_kind == "negative second moment":
+        entry["exp_avg_sq"].view(-1)[0] = -1.862645149230957e-09
+    elif damage_kind == "zero step":
+        entry["step"] = torch.zeros_like(entry["step"])
+    elif damage_kind == "zero eps":
+        state["optimizer"]["param_groups"][0]["eps"] = 0.0
+    else:
+        state["optimizer"]["param_groups"][0]["betas"] = (0.9, 1.0)
     path = tmp_path_factory.mktemp("ckpt") / fname
     torch.save(state, path)
     tr = _fresh_trainer()

@@ -42,6 +42,18 @@ ADAM_STATE = ("step", "exp_avg", "exp_avg_sq")  # what torch.optim.Adam keeps pe
 LOG_COLUMNS = ("step", "wall_s", "loss", "n_gaussians", "psnr_novel", "psnr_blur")
 
 
+def _adam_hyperparameters_valid(group: dict) -> bool:
+    """Whether an Adam parameter group's saved hyperparameters are usable: lr finite ≥ 0, eps finite > 0, betas in
+    [0, 1), weight_decay finite ≥ 0."""
+    try:
+        lr, eps, wd = float(group["lr"]), float(group["eps"]), float(group.get("weight_decay", 0.0))
+        b1, b2 = (float(b) for b in group["betas"])
+    except (KeyError, TypeError, ValueError):
+        return False
+    finite = all(math.isfinite(v) for v in (lr, eps, wd, b1, b2))
+    return finite and lr >= 0 and eps > 0 and wd >= 0 and 0 <= b1 < 1 and 0 <= b2 < 1
+
+
 @dataclass
 class RunResult:
     model: GaussianModel
@@ -178,6 +190,14 @@ class Trainer:
             for key, t in entry.items():
                 if isinstance(t, torch.Tensor) and t.is_floating_point() and not bool(torch.isfinite(t).all()):
                     return f"optimizer {key} has NaN/Inf values"
+            # Adam divides by sqrt(exp_avg_sq) and by 1 - beta^step: a flipped sign bit or step byte gives NaN steps
+            if entry["exp_avg_sq"].numel() and float(entry["exp_avg_sq"].min()) < 0:
+                return f"optimizer exp_avg_sq {index} has negative values"
+            if entry["step"].numel() != 1 or not float(entry["step"]) >= 1:
+                return f"optimizer step {index} is {entry['step'].tolist()}"
+        for group in opt.get("param_groups", []) if isinstance(opt.get("param_groups"), list) else []:
+            if not isinstance(group, dict) or not _adam_hyperparameters_valid(group):
+                return f"optimizer hyperparameters of group {group.get('name') if isinstance(group, dict) else '?'}"
         missing = [k for k in ("step", "strategy", "method", "rng", "torch_rng", "order", "rows", "wall", "bad",
                                "skipped") if k not in state]  # fmt: skip
         return f"missing {', '.join(missing)}" if missing else None
