@@ -30,6 +30,11 @@ DEFAULT_LEDGER = REPO / "docs" / "suite"
 KEPT = ("config.json", "train_log.csv")
 
 
+def reference_dir(ledger: Path, scene: str, bins: int, run: str) -> Path:
+    """Where a plateau reference of ``run`` on ``scene`` at B = ``bins`` is kept in the ledger."""
+    return Path(ledger) / "plateau" / f"{scene}_b{bins}_{run}"
+
+
 def reference_options(spec: dict, steps: int | None, eval_every: int | None = None) -> dict:
     """The run's `eigs train --config` values with the reference's step count (``steps`` or the default above) and,
     when given, its held-out evaluation interval."""
@@ -76,7 +81,7 @@ def main() -> None:
     if absent:
         raise SystemExit(f"plateau_reference.py: error: upstream not run in {d}: {', '.join(absent)}")
     eigs = Path(sys.executable).with_name("eigs")
-    dest = args.ledger / "plateau" / f"{args.scene}_b{bins}_{args.run}"
+    dest = reference_dir(args.ledger, args.scene, bins, args.run)
     with tempfile.TemporaryDirectory(prefix="plateau-") as tmp:
         run_dir = Path(tmp) / "run"
         cmd = [str(eigs), "train", *map(str, inputs), "-o", str(run_dir), "--config", json.dumps(values),

@@ -23,7 +23,9 @@ import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench._report import machine, table  # noqa: E402
+from bench.plateau_reference import reference_dir  # noqa: E402
 from bench.schedule import LedgerError, job_time, jobs_of, simulate  # noqa: E402
+from eigs.util.atomic import atomic_path  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 TOLERANCE_DB = 0.3
@@ -57,7 +59,7 @@ def trained_steps(directory: Path, scene: str, bins: int, run: str) -> int:
 def reference_curve(directory: Path, scene: str, bins: int, run: str) -> list[tuple[int, float]]:
     """The held-out curve of the run's plateau reference (bench/plateau_reference.py: the run trained longer on the
     scene), [] when there is none."""
-    return read_curve(directory / "plateau" / f"{scene}_b{bins}_{run}" / "train_log.csv")
+    return read_curve(reference_dir(directory, scene, bins, run) / "train_log.csv")
 
 
 BEGIN, END = "<!-- suite-report:begin -->", "<!-- suite-report:end -->"
@@ -179,8 +181,10 @@ def main() -> None:
             spliced = splice(args.readme.read_text(), report, str(args.readme))
         except (OSError, ValueError) as err:
             raise SystemExit(f"suite_report.py: error: {err}") from None
-        args.readme.write_text(spliced)
-    args.out.write_text(report)
+        with atomic_path(args.readme) as tmp:
+            tmp.write_text(spliced)
+    with atomic_path(args.out) as tmp:
+        tmp.write_text(report)
     print(f"wrote {args.out}: {len(done)} of {len(jobs)} jobs")
 
 
