@@ -29,7 +29,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-given", dest="allow_given", action="store_const", const=False,
                    help="auto mode never picks given poses")  # fmt: skip
     p.add_argument("--matcher", choices=MATCHERS, help="auto: exhaustive up to 150 images, else sequential + "
-                   f"spatial (default {_C.matcher})")  # fmt: skip
+                   f"spatial, then exhaustive if the scene stays split (default {_C.matcher})")  # fmt: skip
     p.add_argument("--global-mapping", action="store_const", const=True,
                    help="global (GLOMAP) instead of incremental mapping")  # fmt: skip
     p.add_argument("--refine-intrinsics", action="store_const", const=True,

@@ -16,9 +16,10 @@ MATCHERS = ("auto", "exhaustive", "sequential")
 
 @dataclass
 class ColmapOptions:
-    """Options of the COLMAP steps. ``matcher``: auto (exhaustive up to 150 images, else sequential + spatial)
-    | exhaustive | sequential; ``global_mapping``: GLOMAP instead of incremental mapping; ``refine_intrinsics``:
-    let bundle adjustment refine the focal length; ``feature_scale``: SIFT upsampling, None for automatic;
+    """Options of the COLMAP steps. ``matcher``: auto (exhaustive up to 150 images, else sequential + spatial,
+    then exhaustive when the scene is still split into several models) | exhaustive | sequential;
+    ``global_mapping``: GLOMAP instead of incremental mapping; ``refine_intrinsics``: let bundle adjustment
+    refine the focal length; ``feature_scale``: SIFT upsampling, None for automatic;
     ``device``: auto | cpu | cuda; ``seed``: of COLMAP's RANSAC and mapper."""
 
     matcher: str = "auto"
