@@ -26,12 +26,14 @@ from __future__ import annotations
 import argparse
 import csv
 import datetime as _dt
+import fnmatch
 import io
 import json
 import os
 import shutil
 import subprocess
 import sys
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -279,8 +281,11 @@ def save(
     replace_present: bool = False,
     max_render_kb: float = MAX_RENDER_KB,
     machine: str | None = None,
+    only: Sequence[str] = (),
 ) -> tuple[list[str], list[str]]:
     """Copy the jobs of ``cfg`` that finished in ``directory`` into ``ledger``. Returns (lines saved, lines skipped).
+    ``only``: job-id glob patterns (``sfm:blocks:6``, ``*:tree:eigs-b8``); when given, the other jobs are left alone
+    (a rerun of a few jobs in a directory whose other jobs came from another checkout).
 
     Every benchmark and metrics file to be copied is checked first, so a malformed one stops the command before it
     writes anything. Per job: its small files, then its jobs.csv row, then its benchmark file (so an interrupted
@@ -294,6 +299,8 @@ def save(
     todo: list[tuple[Job, float, float | None]] = []
     skipped: list[str] = []
     for job in suite_jobs(cfg):
+        if only and not any(fnmatch.fnmatchcase(job.id, pat) for pat in only):
+            continue
         present = in_ledger(ledger, job)
         if present and not replace_present:
             if finished(directory, job):
@@ -419,6 +426,8 @@ def main(argv: list[str] | None = None) -> int:
     common(p)
     p.add_argument("--commit", default=None, help="git commit of DIR's checkout (default: this repository's HEAD)")
     p.add_argument("--replace", action="store_true", help="overwrite jobs that are in the ledger already")
+    p.add_argument("--only", action="append", default=[], metavar="GLOB",
+                   help="save only the jobs whose id matches a glob ('*:tree:eigs-b8'); repeatable")  # fmt: skip
     p.add_argument("--max-render-kb", type=float, default=MAX_RENDER_KB,
                    help=f"keep the qualitative grid's renders up to this size (default {MAX_RENDER_KB} KB "
                    "each)")  # fmt: skip
@@ -437,7 +446,7 @@ def main(argv: list[str] | None = None) -> int:
             check_current(cfg, args.ledger)
         if args.command == "save":
             saved, skipped = save(args.directory, cfg, args.ledger, commit=args.commit, replace_present=args.replace,
-                                  max_render_kb=args.max_render_kb)  # fmt: skip
+                                  max_render_kb=args.max_render_kb, only=args.only)  # fmt: skip
             for line in saved:
                 print(f"saved {line}")
             for line in skipped:

@@ -189,6 +189,24 @@ def test_save_skips_jobs_in_the_ledger_and_replace_overwrites(workflow, tmp_path
     assert not [f for f in files_under(ledger) if "model" in f or "partial" in f or "checkpoint" in f]
 
 
+def test_save_only_takes_the_matching_jobs(workflow, tmp_path, capsys):
+    cfg, d = workflow
+    ledger = tmp_path / "ledger"
+    common = ("--directory", d, "--config", cfg, "--ledger", ledger)
+    assert ledger_main("save", *common, "--commit", "old", capsys=capsys)[0] == 0
+    benchmark(d / "benchmarks/train/beta_b4_3dgs.tsv", 999.0, 900.0)  # the one job rerun at a new checkout
+    code, out, _ = ledger_main("save", *common, "--replace", "--commit", "new", "--only", "*:beta:3dgs",
+                               "--only", "sfm:beta:4", capsys=capsys)  # fmt: skip
+    assert code == 0
+    saved = {line.removeprefix("saved ").split(": ")[0] for line in out.splitlines() if line.startswith("saved ")}
+    assert saved == {"train:beta:3dgs", "evaluate:beta:3dgs", "sfm:beta:4"}
+    rows = {r["job"]: r for r in csv.DictReader((ledger / "jobs.csv").open())}
+    assert {j for j, r in rows.items() if r["commit"] == "new"} == {"train:beta:3dgs", "evaluate:beta:3dgs",
+                                                                    "sfm:beta:4"}  # fmt: skip
+    assert rows["train:beta:3dgs"]["wall_s"] == "999.00"
+    assert len(rows) == 14
+
+
 def test_missing_lists_exactly_the_unfinished_targets(workflow, tmp_path, capsys):
     cfg, d = workflow
     ledger = tmp_path / "ledger"
