@@ -289,7 +289,6 @@ class MappingResult:
     reconstruction: object  # pycolmap.Reconstruction, the largest model
     model_sizes: list[int]  # registered images per model, largest first
     lost_to_other_models: int  # images registered only in models other than the kept one
-    exhaustive: bool = False  # the model came from the exhaustive pass after a split (run._exhaustive_pass)
 
 
 def map_images(

@@ -246,9 +246,10 @@ def _colmap_reconstruction(db, ldir, work, lat, px, cfg, timer, report):
         ):
             res = _spatial_pass(db, ldir, work, res, lat.slots, lat.names, lat.per_view, opts, px)
         if res.lost_to_other_models and report["matcher"] == "sequential" and opts.matcher == "auto":
-            res = _exhaustive_pass(db, ldir, work, res, len(lat.names), lat.per_view, opts, px)
-            if res.exhaustive:
+            kept = _exhaustive_pass(db, ldir, work, res, len(lat.names), lat.per_view, opts, px)
+            if kept is not res:
                 report["matcher"] = "sequential+exhaustive"
+            res = kept
     report["models"] = res.model_sizes
     if res.reconstruction is None:
         raise EigsError(
@@ -476,8 +477,8 @@ def _spatial_pass(db, ldir, work, res, slots, names, L, opts, px):
 def _exhaustive_pass(db, ldir, work, res, n_images, L, opts, px):
     """The scene is still split after sequential and spatial matching (issue 18: at B = 6 and 8 latent poses,
     10 of 24 views of `blocks` and `tree` fell outside the kept model): match the remaining pairs exhaustively
-    (COLMAP skips pairs the database already holds) and map again. Keeps the new model when it registers more
-    images than the old one; ``exhaustive`` on the result says which was kept."""
+    (COLMAP skips pairs the database already holds) and map again. Returns the new result when its largest model
+    registers more images than the old one, else ``res`` itself."""
     from dataclasses import replace
 
     from eigs.sfm import colmap as cm
@@ -486,7 +487,7 @@ def _exhaustive_pass(db, ldir, work, res, n_images, L, opts, px):
     cm.match(db, n_images, L, replace(opts, matcher="exhaustive"), px=px)
     res2 = cm.map_images(db, ldir, work / "map3", opts, px=px)
     if res2.reconstruction is not None and res2.model_sizes[0] > res.model_sizes[0]:
-        return replace(res2, exhaustive=True)
+        return res2
     return res
 
 
