@@ -11,7 +11,7 @@ Kept import-light: the CLI imports this package at start-up.
 
 from __future__ import annotations
 
-FORMATS = ("e2nerf-synthetic", "e2nerf-real", "h5", "txt", "aedat4")
+FORMATS = ("e2nerf-synthetic", "e2nerf-real", "h5", "txt", "aedat4", "rosbag", "prophesee", "aedat", "numpy")
 
 
 def ingest(fmt: str, source: str, out: str, options: object | None = None) -> str:
@@ -25,6 +25,10 @@ def ingest(fmt: str, source: str, out: str, options: object | None = None) -> st
 
     opts = options if options is not None else IngestOptions()
     assert isinstance(opts, IngestOptions)
+    if fmt != "numpy":
+        opts.refuse(fmt, "columns")
+    if fmt != "rosbag":
+        opts.refuse(fmt, "topics")
     if fmt in ("e2nerf-synthetic", "e2nerf-real"):
         from eigs.io.e2nerf import ingest_e2nerf
 
@@ -35,6 +39,14 @@ def ingest(fmt: str, source: str, out: str, options: object | None = None) -> st
         from eigs.io.text import open_text_source as opener
     elif fmt == "aedat4":
         from eigs.io.aedat4 import open_aedat4_source as opener
+    elif fmt == "rosbag":
+        from eigs.io.rosbag import open_rosbag_source as opener
+    elif fmt == "prophesee":
+        from eigs.io.prophesee import open_prophesee_source as opener
+    elif fmt == "aedat":
+        from eigs.io.aedat_legacy import open_aedat_legacy_source as opener
+    elif fmt == "numpy":
+        from eigs.io.numpy_events import open_numpy_source as opener
     else:
         raise EigsError(None, f"unknown format {fmt!r} (one of {', '.join(FORMATS)})")
     from eigs.io.raw import ingest_raw

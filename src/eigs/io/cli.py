@@ -4,9 +4,19 @@ from __future__ import annotations
 
 import argparse
 
-HELP = "read E²NeRF layouts, HDF5/text/AEDAT4 event recordings and frames into a scene file"
+HELP = "read E²NeRF layouts, HDF5/text/AEDAT/Prophesee/NumPy event recordings, ROS bags and frames into a scene file"
 
-_FORMATS = ("e2nerf-synthetic", "e2nerf-real", "h5", "txt", "aedat4")  # == eigs.io.FORMATS (kept import-light)
+_FORMATS = (  # == eigs.io.FORMATS (kept import-light)
+    "e2nerf-synthetic",
+    "e2nerf-real",
+    "h5",
+    "txt",
+    "aedat4",
+    "rosbag",
+    "prophesee",
+    "aedat",
+    "numpy",
+)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -47,7 +57,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_false",
         help="keep the calibration's distortion instead of undistorting frames and events",
     )
-    parser.add_argument("--time-unit", choices=("s", "ms", "us", "ns"), help="h5: time unit when the file does not say")
+    parser.add_argument(
+        "--time-unit", choices=("s", "ms", "us", "ns"), help="h5, numpy: time unit when the file does not say"
+    )
+    parser.add_argument(
+        "--columns", metavar="ORDER", help="numpy: column order of a plain (N, K) array, e.g. t,x,y,p (- skips one)"
+    )
+    parser.add_argument(
+        "--topic",
+        dest="topics",
+        action="append",
+        metavar="ROLE=TOPIC",
+        help="rosbag: the topic for ROLE (events, image, camera_info, exposure); repeat for several roles",
+    )
     parser.add_argument(
         "--frames", metavar="FILE", help="h5: frames sidecar (default: <stem>.frames.txt beside the file)"
     )
@@ -79,6 +101,8 @@ def options_from_args(args: argparse.Namespace):  # -> IngestOptions
         camera_response=args.camera_response,
         contrast_threshold=args.contrast_threshold,
         compression=args.compression,
+        columns=getattr(args, "columns", None),
+        topics=None if getattr(args, "topics", None) is None else tuple(args.topics),
     )
 
 

@@ -39,6 +39,8 @@ class IngestOptions:
     camera_response: str | None = None
     contrast_threshold: float | None = None
     compression: str | None = None
+    columns: str | None = None  # numpy: column order of a plain (N, K) array, e.g. "t,x,y,p"
+    topics: tuple[str, ...] | None = None  # rosbag: ROLE=TOPIC choices (roles: events, image, camera_info, exposure)
 
     def __post_init__(self) -> None:
         if self.keep_events is not None and self.keep_events not in KEEP_EVENTS:
