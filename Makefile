@@ -6,7 +6,7 @@ CORES  ?= 2
 CONFIG ?= config/config.yaml
 PYTEST_WORKERS ?= 2
 
-.PHONY: venv reproduce toy cluster test test-cluster lint bench clean-results
+.PHONY: venv reproduce toy cluster test test-cluster lint bench gpu-bundle gpu-wheels clean-results
 
 # Bootstrap .venv with pinned dependencies. torch is installed first and pinned (2.13.0 CPU on our machines):
 # an unpinned torch pulls a multi-GB CUDA build. The package is installed editable without build isolation
@@ -45,6 +45,28 @@ test-cluster: venv
 # minutes (few scenes, sizes and repeats; writes results/bench/benchmarks.md instead).
 bench: venv
 	$(BIN)/snakemake bench --cores $(CORES) --configfile=$(CONFIG) $(if $(QUICK),--config bench_quick=1)
+
+# The GPU check's inputs (issue 34; bench/gpu_check.sh, docs/benchmarks.md "GPU path"), both in folders that
+# .git/info/exclude ignores: .gpu_bundle (chair's scene, EDI, SfM poses, init.ply and the LPIPS-alex weights, made by
+# the workflow in a scratch worktree at HEAD so this checkout's results/ and Snakemake lock stay untouched) and .whl
+# (the wheels the GPU machine lacks: gsplat of the `gpu` extra and plyfile; the rest is there already).
+GPU_WORKTREE ?= /tmp/eigs-gpu-bundle
+GPU_SCENE ?= chair
+GPU_BINS ?= 4
+EXCLUDE = $(shell git rev-parse --git-path info/exclude)
+gpu-bundle: venv
+	grep -qx '/.gpu_bundle/' $(EXCLUDE) 2>/dev/null || echo '/.gpu_bundle/' >> $(EXCLUDE)
+	test -d $(GPU_WORKTREE) || git worktree add --detach $(GPU_WORKTREE) HEAD
+	cd $(GPU_WORKTREE) && PATH=$(CURDIR)/$(BIN):$$PATH PYTHONPATH=$(GPU_WORKTREE)/src $(CURDIR)/$(BIN)/snakemake \
+		--cores 1 --configfile config/config.yaml results/$(GPU_SCENE)/scene.h5 results/$(GPU_SCENE)/b$(GPU_BINS)/edi.h5 \
+		results/$(GPU_SCENE)/b$(GPU_BINS)/sfm results/$(GPU_SCENE)/b$(GPU_BINS)/init.ply resources/lpips/MANIFEST.json
+	$(BIN)/python bench/gpu_check.py bundle --directory $(GPU_WORKTREE) --scene $(GPU_SCENE) -o .gpu_bundle
+
+gpu-wheels: venv
+	grep -qx '/.whl/' $(EXCLUDE) 2>/dev/null || echo '/.whl/' >> $(EXCLUDE)
+	$(BIN)/pip download --quiet --no-deps --only-binary=:all: --python-version 3.12 --implementation cp \
+		--platform manylinux_2_28_x86_64 --platform manylinux_2_17_x86_64 --platform manylinux2014_x86_64 \
+		-d .whl gsplat==1.5.3 plyfile==1.1.5
 
 clean-results:
 	rm -rf results logs benchmarks .snakemake
