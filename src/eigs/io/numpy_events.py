@@ -61,7 +61,7 @@ class _Header:
     data_start: int
 
 
-def _read_header(fh: BinaryIO, where: str) -> _Header:
+def _read_header(fh: BinaryIO, path: Path, what: str) -> _Header:
     fmt = np.lib.format
     try:
         version = fmt.read_magic(fh)
@@ -70,13 +70,13 @@ def _read_header(fh: BinaryIO, where: str) -> _Header:
         elif version == (2, 0):
             shape, fortran, dtype = fmt.read_array_header_2_0(fh)
         else:
-            raise EigsError(where, f"npy format version {version} is not supported (1.0 and 2.0 are)")
+            raise EigsError(path, f"{what}: npy format version {version} is not supported (1.0 and 2.0 are)")
     except EigsError:
         raise
-    except (ValueError, OSError, EOFError, zlib.error, zipfile.BadZipFile) as err:
-        raise EigsError(where, f"not a readable .npy array ({str(err).splitlines()[0][:120]})") from None
+    except Exception as err:  # numpy's header parser raises ValueError, SyntaxError, TokenError, ... on damage
+        raise EigsError(path, f"{what}: not a readable .npy array ({str(err).splitlines()[0][:120]})") from None
     if dtype.hasobject:
-        raise EigsError(where, "holds Python objects (pickled); eigs reads numeric arrays only")
+        raise EigsError(path, f"{what} holds Python objects (pickled); eigs reads numeric arrays only")
     return _Header(tuple(int(s) for s in shape), bool(fortran), dtype, fh.tell())
 
 
@@ -126,9 +126,9 @@ class _Array:
     def __init__(self, path: Path, member: str | None):
         self.path = path
         self.member = member
-        self.where = str(path) if member is None else f"{path}:{member}"
+        self.where = "the array" if member is None else f"member {member}"
         with self.open() as fh:
-            self.header = _read_header(fh, self.where)
+            self.header = _read_header(fh, path, self.where)
 
     def open(self) -> BinaryIO:
         try:
@@ -195,7 +195,9 @@ def _plan_records(arr: _Array, cols: list[str] | None) -> _Plan:
     h = arr.header
     if h.dtype.names is not None:
         if cols is not None:
-            raise EigsError("--columns", f"{arr.where} is a structured array whose fields have names; omit --columns")
+            raise EigsError(
+                "--columns", f"{arr.path} ({arr.where}) is a structured array whose fields have names; omit --columns"
+            )
         if len(h.shape) != 1:
             raise EigsError(arr.path, f"{arr.where}: structured array of shape {h.shape}, expected one dimension")
         try:
@@ -226,7 +228,7 @@ def _plan_records(arr: _Array, cols: list[str] | None) -> _Plan:
     if cols is None:
         raise EigsError(
             "--columns",
-            f"{arr.where} is a plain {h.shape[0]}×{h.shape[1]} array: say which column is which, "
+            f"{arr.path} ({arr.where}) is a plain {h.shape[0]}×{h.shape[1]} array: say which column is which, "
             "e.g. --columns t,x,y,p",
         )
     k = len(cols)
