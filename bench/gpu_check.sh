@@ -44,7 +44,7 @@ WORK=${GPU_CHECK_WORK:-/tmp/gpu_check}
 SITE="$WORK/site"
 LOG="$OUTDIR/gpu_check.log"
 JUNIT="$OUTDIR/junit.xml"
-RUNS_JSON="$WORK/runs.json"
+RUNS_JSON="$OUTDIR/runs.json"  # in --out: a check cut short still returns the runs it finished
 exec > >(tee -a "$LOG") 2>&1
 t_start=$(date +%s)
 stamp() { echo "== gpu_check $(date -u +%H:%M:%S) (+$(( $(date +%s) - t_start )) s): $*"; }
@@ -98,7 +98,7 @@ report() {
 TESTS_RC=""
 if [ "$SKIP_TESTS" = 0 ]; then
     stamp "CUDA tests"
-    timeout 420 "$PY" -m pytest -p no:cacheprovider -p no:xdist -q -rA --junitxml="$JUNIT" \
+    timeout 240 "$PY" -m pytest -p no:cacheprovider -p no:xdist -q -rA --junitxml="$JUNIT" \
         tests/render/test_gsplat_conformance.py "tests/train/test_ade.py::test_fused_on_cuda_equals_cpu_reference"
     TESTS_RC=$?
     stamp "CUDA tests exited $TESTS_RC"
