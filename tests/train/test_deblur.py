@@ -219,3 +219,33 @@ def test_latent_weight_adds_the_l1_of_each_latent_render_to_its_edi_frame(data):
     torch.testing.assert_close(out.loss, out0.loss + w * expect, atol=1e-6, rtol=1e-5)
     with pytest.raises(EigsError, match="latent_weight"):
         _method(data, "eigs", latent_weight=-1.0)
+
+
+@pytest.mark.parametrize(
+    ("name", "options"),
+    [("e2gs", {}), ("eigs", {"pose_prior": True, "ade_zero_last": True}),
+     ("bad-gaussians", {"mode": "bezier", "n_control": 5})],  # 5 controls through 5 latent poses: an exact fit
+)  # fmt: skip
+def test_latent_motion_is_the_rigid_motion_of_the_latent_poses_at_start(data, name, options):
+    """At step 0 the motion a method exports equals P_0·P_k⁻¹ x − x computed here in float64: e2gs renders the latent
+    poses; EiGS with the pose prior and a zero last layer has no residual; a trajectory with as many control twists
+    as latent poses starts through them."""
+    tr = _method(data, name, **options)
+    p = tr.model.params
+    x, q = p["means"].detach()[:50], p["quats"].detach()[:50]
+    m = tr.method.latent_motion(x, q)
+    assert m.displacement.shape == (data.n_views, data.n_latent - 1, 50, 3)
+    v = int(tr.method.views[0])
+    for k in range(1, data.n_latent):
+        a = data.c2w[v, 0] @ torch.linalg.inv(data.c2w[v, k])
+        expect = x.double() @ a[:3, :3].T + a[:3, 3] - x.double()
+        torch.testing.assert_close(m.displacement[v, k - 1].double(), expect, atol=2e-5, rtol=0)
+        if m.camera_c2w is not None:
+            torch.testing.assert_close(m.camera_c2w[v, k - 1], data.c2w[v, k], atol=1e-5, rtol=0)
+    assert (m.camera_c2w is None) == (name == "eigs")
+
+
+def test_methods_without_motion_export_none(data):
+    tr = _method(data, "edi-3dgs")
+    p = tr.model.params
+    assert tr.method.latent_motion(p["means"], p["quats"]) is None

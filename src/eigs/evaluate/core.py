@@ -212,12 +212,36 @@ def evaluate_run(
             {v: int(np.sum(tc.method == k)) for k, v in METHODS.items()} if has_gt and tc is not None else None
         ),
         "path": None if has_gt else {"kind": path_kind, "frames": int(path_frames)},
+        "motion": motion_metrics(run_dir, scene, poses.timestamps_us),
     }
     with atomic_path(output.parent / "per_image.csv") as tmp:
         tmp.write_text(per_image_csv(rows))
     with atomic_path(output) as tmp:
         tmp.write_text(json.dumps(result, indent=2, allow_nan=False) + "\n")
     return result
+
+
+def motion_metrics(run_dir: Path, scene: Any, timestamps_us: np.ndarray) -> dict[str, Any] | None:
+    """The run's motion within the exposures against the ground-truth camera motion (:mod:`eigs.metrics.motion`):
+    None when the run models no motion (no ``motion.npz``) or the scene has no ground-truth poses."""
+    from eigs.artifacts.motion import FILE_NAME, read_motion
+    from eigs.metrics.motion import motion_errors
+    from eigs.scene.truth import latent_poses_at
+
+    if not (run_dir / FILE_NAME).exists():
+        return None
+    got = latent_poses_at(scene, timestamps_us)
+    if got is None:
+        log.info("%s: the scene has no ground-truth poses; motion not scored", run_dir)
+        return None
+    gt, source = got
+    m = read_motion(run_dir)
+    if gt.shape[:2] != (m.displacement.shape[0], m.displacement.shape[1] + 1):
+        raise EigsError(run_dir / FILE_NAME, f"motion of {m.displacement.shape[:2]} views × latents does not match "
+                        f"the ground truth's {gt.shape[:2]}")  # fmt: skip
+    errs = motion_errors(m.points, m.displacement, m.reference_c2w, gt, m.views, m.camera_c2w)
+    return {"ground_truth": source, "points": int(m.points.shape[0]),
+            **{k: finite_or_none(v) if isinstance(v, float) else v for k, v in errs.items()}}  # fmt: skip
 
 
 def per_image_csv(rows: list[dict[str, Any]]) -> str:

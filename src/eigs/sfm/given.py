@@ -1,9 +1,5 @@
-"""Known-pose mode: the scene's latent poses are kept exactly; COLMAP only triangulates points.
-
-Also the ground truth every mode is scored against: latent poses at the EDI latent times, from the scene's
-ground-truth latent poses (exact when the times agree, else interpolated within each view) or its dense
-ground-truth trajectory.
-"""
+"""Known-pose mode: the scene's latent poses are kept exactly; COLMAP only triangulates points. (The ground truth
+every mode is scored against comes from :func:`eigs.scene.truth.latent_poses_at`.)"""
 
 from __future__ import annotations
 
@@ -13,49 +9,12 @@ from pathlib import Path
 import numpy as np
 
 from eigs.errors import EigsError
-from eigs.sfm.poses import interpolate_c2w
 
 log = logging.getLogger(__name__)
 
 GUIDED_NEIGHBOURS = 24  # images of other views matched per image in given mode
 GUIDED_RATIO = 0.8  # Lowe ratio among the candidates inside the epipolar band
 GUIDED_MIN_MATCHES = 8
-
-
-def latent_poses_at(
-    scene, timestamps_us: np.ndarray, *, ground_truth_only: bool = True, clamp: bool = False
-) -> tuple[np.ndarray, str] | None:
-    """Scene poses at the latent times ``timestamps_us`` (V, L): ``(c2w (V, L, 4, 4), source)`` or None.
-
-    Sources in order: the scene's latent poses (``ground-truth`` source, or any source when
-    ``ground_truth_only`` is False), exact when their times equal ``timestamps_us`` and interpolated within
-    each view otherwise; then the dense ground-truth trajectory. ``source`` names what was used. Latent times
-    outside the trajectory get its end poses with ``clamp``, else NaN (no ground truth there).
-    """
-    ts = np.asarray(timestamps_us, np.int64)
-    p = scene.poses
-    if p is not None and (p.source == "ground-truth" or not ground_truth_only):
-        if p.latent_c2w.shape[0] != ts.shape[0]:
-            log.warning(
-                "scene has latent poses for %d views but EDI has %d: ignoring them", p.latent_c2w.shape[0], ts.shape[0]
-            )
-        elif p.latent_t_us.shape == ts.shape and np.array_equal(p.latent_t_us, ts):
-            return np.array(p.latent_c2w, np.float64), f"scene poses ({p.source})"
-        else:
-            out = np.stack([interpolate_c2w(p.latent_t_us[v], p.latent_c2w[v], ts[v]) for v in range(ts.shape[0])])
-            return out, f"scene poses ({p.source}), interpolated to the latent times"
-    tr = scene.trajectory
-    if tr is not None and tr.t_us.shape[0] >= 1:
-        lo, hi = int(tr.t_us[0]), int(tr.t_us[-1])
-        outside = int(np.count_nonzero((ts < lo) | (ts > hi)))
-        if outside:
-            what = "its end poses are used" if clamp else "they have no ground truth"
-            log.warning("%d latent times lie outside the ground-truth trajectory: %s", outside, what)
-        out = interpolate_c2w(tr.t_us, tr.c2w, ts.ravel()).reshape(*ts.shape, 4, 4)
-        if not clamp:
-            out[(ts < lo) | (ts > hi)] = np.nan
-        return out, "ground-truth trajectory, interpolated to the latent times"
-    return None
 
 
 def triangulate(

@@ -358,7 +358,7 @@ MIN_MATCHED = 3  # latents with ground truth needed for the Sim(3) alignment
 def _ground_truth_accuracy(scene, edi, c2w, registered, report):
     """Accuracy of the estimated latent poses against the scene's ground truth, when it has some:
     (ground truth (poses, description) or None, Sim(3) canonical estimate → ground truth or None)."""
-    from eigs.sfm.given import latent_poses_at
+    from eigs.scene.truth import latent_poses_at
 
     gt = latent_poses_at(scene, edi.timestamps_us)
     if gt is None:
@@ -434,7 +434,7 @@ def _drop_single_view_points(rec, view_of_name: dict[str, int]) -> int:
 
 
 def _given_poses(scene, timestamps_us: np.ndarray, path: Path) -> np.ndarray:
-    from eigs.sfm.given import latent_poses_at
+    from eigs.scene.truth import latent_poses_at
 
     got = latent_poses_at(scene, timestamps_us, ground_truth_only=False, clamp=True)
     if got is None:

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from typing import Any, ClassVar
 
+import numpy as np
 import torch
 from torch import Tensor
 
@@ -33,7 +34,7 @@ from eigs.losses.events import (
 from eigs.train.config import TrainConfig
 from eigs.train.data import TrainData
 from eigs.train.event_inputs import EventInputs
-from eigs.train.methods import Method, StepOutput, register
+from eigs.train.methods import LatentMotion, Method, StepOutput, register
 from eigs.train.model import GaussianModel
 from eigs.train.rigid import transform_gaussians
 from eigs.train.trajectory import MODES, curve_weights, fit_controls, se3_exp, se3_log
@@ -116,6 +117,23 @@ class TrajectoryMethod(Method):
     def load_state_dict(self, state: dict) -> None:
         with torch.no_grad():  # in place: the optimiser holds this tensor
             self.controls.copy_(state["controls"].to(self.controls.device))
+
+    @torch.no_grad()
+    def latent_motion(self, means: Tensor, quats: Tensor) -> LatentMotion:
+        """The trajectory at the latent times u = k / N, k = 1..N: camera poses ``P_ref · exp(ξ(u))`` and the
+        scene motion that renders them from ``P_ref``, ``P_ref · exp(−ξ(u)) · P_ref⁻¹ x − x``."""
+        u = torch.arange(1, self.n_bins + 1, dtype=torch.float64) / self.n_bins
+        w = curve_weights(self.mode, self.controls.shape[1], u)  # (N, K)
+        xi = torch.einsum("nk,vkd->vnd", w, self.controls.detach().cpu().double())  # (V, N, 6)
+        ref = torch.nan_to_num(self.ref)  # (V, 4, 4) float64
+        cams = ref[:, None] @ se3_exp(xi)  # (V, N, 4, 4)
+        moves = (ref[:, None] @ se3_exp(-xi) @ torch.linalg.inv(ref)[:, None]).float()
+        x = means.detach().cpu().float()
+        disp = torch.stack([torch.stack([transform_gaussians(x, quats.detach().cpu().float(), g)[0] - x for g in mv])
+                            for mv in moves])  # fmt: skip
+        views = np.zeros(self.data.n_views, bool)
+        views[self.views] = True
+        return LatentMotion(disp, self.ref.clone(), views, cams)
 
     # ------------------------------------------------------------------ one step
     def gaussian_motions(self, v: int) -> Tensor:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from typing import Any, ClassVar
 
+import numpy as np
 import torch
 from torch import Tensor
 
@@ -30,7 +31,7 @@ from eigs.train.ade import ADE, PRECISIONS, compute_dtype
 from eigs.train.config import TrainConfig
 from eigs.train.data import TrainData
 from eigs.train.event_inputs import EventInputs
-from eigs.train.methods import Method, StepOutput, register
+from eigs.train.methods import LatentMotion, Method, StepOutput, register
 from eigs.train.model import GaussianModel
 from eigs.train.rigid import transform_gaussians
 
@@ -146,8 +147,9 @@ class MultiRender(Method):
                 with torch.no_grad():
                     self.ade.last.weight.zero_()
             self.pose_inputs = torch.stack([self.ade.encode_poses(self.c2w[v]) for v in range(data.n_views)]).to(device)
-            # P_0 · P_k⁻¹ moves the Gaussians the way the camera moved from P_0 to P_k (for the pose prior)
-            self.relative = (self.c2w[:, :1] @ rigid_inverse(self.c2w[:, 1:])).float().to(device)  # (V, N, 4, 4)
+        # P_0 · P_k⁻¹ moves the Gaussians the way the camera moved from P_0 to P_k (the pose prior; the motion of the
+        # fixed-pose methods)
+        self.relative = (self.c2w[:, :1] @ rigid_inverse(self.c2w[:, 1:])).float().to(device)  # (V, N, 4, 4)
 
     def discrete_targets(self) -> Tensor:
         """(V, H, W, C) blur targets for the N+1-sample average: the EDI latent frames averaged in linear intensity
@@ -198,19 +200,9 @@ class MultiRender(Method):
                 render(self.c2w[v, k])
             return images, infos, None, list(range(self.n_latent))
         p = model.params
-        x = p["means"].detach()
-        out = self.ade(x, self.pose_inputs[v])  # (N_G, N, 3 or 10)
+        out, disp, prior_quats = self.latent_offsets(v, p["means"].detach(), p["quats"])
         dx = out[..., :3]
         lam = float(o["lambda_p"])
-        # offsets at the latent times k = 0..N (k = 0: the Gaussians as they are)
-        disp = [torch.zeros_like(x)]
-        prior_quats: list[Tensor | None] = [None] * self.n_latent
-        for k in range(1, self.n_latent):
-            dk = lam * dx[:, k - 1]
-            if o["pose_prior"]:  # the Gaussians moved by P_0·P_k⁻¹ (centres and rotations) render what P_k sees
-                moved_x, prior_quats[k] = transform_gaussians(x, p["quats"], self.relative[v, k - 1])
-                dk = dk + (moved_x - x)
-            disp.append(dk)
         shape = [None] + [lam * out[:, k - 1, 3:] for k in range(1, self.n_latent)] if o["shape"] else None
         sub = int(o["subframes"])
         latent_pos = []
@@ -235,6 +227,41 @@ class MultiRender(Method):
         images, infos = [images[i] for i in order], [infos[i] for i in order]
         latent_pos = [order.index(i) for i in latent_pos]
         return images, infos, dx, latent_pos
+
+    def latent_offsets(self, v: int, x: Tensor, quats: Tensor) -> tuple[Tensor, list[Tensor], list[Tensor | None]]:
+        """The ADE's raw output (G, N, 3 or 10) for view v at centres ``x`` (G, 3) (detached), the centre offsets
+        at the latent times k = 0..N (k = 0: zero) and, with the pose prior, the rotated quaternions per k."""
+        o = self.options
+        assert self.ade is not None
+        out = self.ade(x, self.pose_inputs[v])  # (G, N, 3 or 10)
+        lam = float(o["lambda_p"])
+        disp = [torch.zeros_like(x)]
+        prior_quats: list[Tensor | None] = [None] * self.n_latent
+        for k in range(1, self.n_latent):
+            dk = lam * out[:, k - 1, :3]
+            if o["pose_prior"]:  # the Gaussians moved by P_0·P_k⁻¹ (centres and rotations) render what P_k sees
+                moved_x, prior_quats[k] = transform_gaussians(x, quats, self.relative[v, k - 1])
+                dk = dk + (moved_x - x)
+            disp.append(dk)
+        return out, disp, prior_quats
+
+    @torch.no_grad()
+    def latent_motion(self, means: Tensor, quats: Tensor) -> LatentMotion:
+        """The centre offsets of the renders at k = 1..N (ADE, with the prior when on), or for the fixed-pose
+        methods (no ADE) the scene motion of their latent cameras, P_0·P_k⁻¹ x − x."""
+        x = means.detach().to(self.device)
+        q = quats.detach().to(self.device)
+        disp = []
+        for v in range(self.data.n_views):
+            if self.ade is not None:
+                disp.append(torch.stack(self.latent_offsets(v, x, q)[1][1:]))
+            else:
+                disp.append(torch.stack([transform_gaussians(x, q, self.relative[v, k])[0] - x
+                                         for k in range(self.n_latent - 1)]))  # fmt: skip
+        views = np.zeros(self.data.n_views, bool)
+        views[self.views] = True
+        cams = None if self.ade is not None else self.c2w[:, 1:].clone()
+        return LatentMotion(torch.stack(disp).cpu(), self.c2w[:, 0].clone(), views, cams)
 
     @staticmethod
     def _render_time(i: int, sub: int) -> float:

@@ -25,6 +25,8 @@ import torch
 
 from eigs import __version__
 from eigs.artifacts.gaussians import write_gaussian_ply
+from eigs.artifacts.motion import FILE_NAME as MOTION_FILE
+from eigs.artifacts.motion import RunMotion, sample_indices, write_motion
 from eigs.errors import EigsError
 from eigs.metrics.pixel import psnr_torch
 from eigs.train.config import TrainConfig
@@ -400,3 +402,25 @@ def write_run(tr: Trainer, run_dir: Path, inputs: dict[str, str]) -> None:
         write_gaussian_ply(tr.model.to_cloud(), tmp / "model.ply")
         (tmp / "config.json").write_text(json.dumps(doc, indent=2, default=float) + "\n")
         (tmp / "train_log.csv").write_text(log_csv(tr.rows))
+        motion = run_motion(tr)
+        if motion is not None:
+            write_motion(motion, tmp / MOTION_FILE)
+
+
+def run_motion(tr: Trainer) -> RunMotion | None:
+    """The motion the trained method applies within the exposures, at a seeded sample of the final Gaussians'
+    centres (:mod:`eigs.artifacts.motion`); None for methods that model none."""
+    p = tr.model.params
+    idx = torch.from_numpy(sample_indices(len(tr.model), tr.cfg.seed)).to(p["means"].device)
+    means, quats = p["means"].detach()[idx], p["quats"].detach()[idx]
+    m = tr.method.latent_motion(means, quats)
+    if m is None:
+        return None
+    return RunMotion(
+        method=tr.cfg.method,
+        points=means.cpu().numpy(),
+        displacement=m.displacement.cpu().numpy(),
+        reference_c2w=m.reference_c2w.cpu().numpy(),
+        views=m.views,
+        camera_c2w=None if m.camera_c2w is None else m.camera_c2w.cpu().numpy(),
+    )

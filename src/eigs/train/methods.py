@@ -25,6 +25,20 @@ from eigs.train.model import GaussianModel
 
 
 @dataclass
+class LatentMotion:
+    """What a method does within the exposures (written to ``motion.npz``, :mod:`eigs.artifacts.motion`).
+
+    ``displacement``: (V, N, G, 3) offsets that render latent k = 1..N of view v from its reference camera;
+    ``reference_c2w``: (V, 4, 4) float64; ``views``: (V,) bool, the views steps are drawn from;
+    ``camera_c2w``: (V, N, 4, 4) float64 camera poses at the latent times, for methods that have them."""
+
+    displacement: Tensor
+    reference_c2w: Tensor
+    views: np.ndarray
+    camera_c2w: Tensor | None = None
+
+
+@dataclass
 class StepOutput:
     """One step's loss, the terms to log (floats) and the rasterizer infos of its renders (for densification)."""
 
@@ -81,6 +95,11 @@ class Method(ABC):
     def param_groups(self) -> list[dict]:
         """Extra Adam param groups (e.g. a network), each with ``name`` and ``lr``."""
         return []
+
+    def latent_motion(self, means: Tensor, quats: Tensor) -> LatentMotion | None:
+        """The motion this method applies within each view's exposure to Gaussians at ``means`` (G, 3) with
+        ``quats`` (G, 4): None for methods that model none (one render per step)."""
+        return None
 
     def state_dict(self) -> dict:
         return {}
