@@ -17,10 +17,9 @@ def evaluate_options(wildcards):
 
 
 # --- tables and figures ---------------------------------------------------------------------------------------
-TABLE_NAMES = ["table1", "table2", "table3", "table4", "table5"]
-
-
 TABLE_ROWS = table_rows(config.get("tables"))
+# Tables I-V always; an optional table (the ladder, config/ladder.yaml) where its runs are configured
+TABLE_NAMES = list(configured_rows(config.get("tables"), RUNS))
 
 
 def tables_json():

@@ -32,6 +32,13 @@ SYNTHETIC_COLUMNS = {
 }
 REAL_COLUMNS = {"brisque": ("all", "brisque")}
 RUN_COLUMNS = {"time_s": "train_seconds", "fps": "fps", "n_gaussians": "n_gaussians"}
+# the motion within the exposure against the ground truth (metrics.json ``motion``, eigs.metrics.motion): means over
+# the scenes where the run models motion and the scene has ground-truth poses
+MOTION_COLUMNS = {
+    "motion_err": "displacement_relative_error",
+    "motion_cos": "displacement_cosine",
+    "motion_rot_deg": "rotation_error_deg",
+}
 
 
 @dataclass
@@ -120,6 +127,8 @@ def summarise(paths: list[str | os.PathLike]) -> dict[str, RunSummary]:
             s.values[col] = _mean([d["metrics"].get(grp, {}).get(key) for d in docs])
         for col, key in RUN_COLUMNS.items():
             s.values[col] = _mean([d.get(key) for d in docs])
+        for col, key in MOTION_COLUMNS.items():
+            s.values[col] = _mean([(d.get("motion") or {}).get(key) for d in docs])
         s.values["n_scenes"] = float(len(docs))
         s.values["n_scenes_gt"] = float(sum(bool(d["ground_truth"]) for d in docs))
     return runs
