@@ -30,6 +30,7 @@ COMMANDS: dict[str, str] = {
     "init": "eigs.sfm.init_cli",
     "train": "eigs.train.cli",
     "render": "eigs.train.render_cli",
+    "view": "eigs.view.cli",
     "evaluate": "eigs.evaluate.cli",
     "tables": "eigs.tables.cli",
     "figures": "eigs.tables.figures_cli",
