@@ -544,7 +544,11 @@ def main(argv: list[str] | None = None) -> int:
             m = verify_bundle(args.bundle)
             print(f"{args.bundle}: {len(m['files'])} files verified ({m['scene']}; runs {', '.join(m['runs'])})")
         elif args.command == "run":
-            run_all(args.bundle, parse_runs(args.runs), args.work, args.device, args.threads, args.output)
+            doc = run_all(args.bundle, parse_runs(args.runs), args.work, args.device, args.threads, args.output)
+            failed = [run for run, r in doc["runs"].items() if "error" in r]
+            if failed:
+                print(f"gpu_check.py run: {', '.join(failed)} failed (see {args.output})", file=sys.stderr)
+                return 1
         else:
             if args.baseline is not None and not args.baseline.is_file():
                 raise CheckError(f"--baseline: {args.baseline} does not exist")
