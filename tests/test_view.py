@@ -6,12 +6,15 @@ from __future__ import annotations
 
 import json
 import os
+import queue
 import signal
 import subprocess
 import sys
+import threading
 import time
 import urllib.request
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -223,42 +226,61 @@ def test_view_errors_are_one_line(case, tmp_path, which, message):
     assert len(lines) == 1 and lines[0].startswith("eigs view: error: ") and message in lines[0], res.stderr
 
 
-def start_viewer(*args: str) -> tuple[subprocess.Popen, str]:
-    """Start ``eigs view ARGS --port 0`` and return the process and the URL it prints."""
-    proc = subprocess.Popen([sys.executable, "-m", "eigs", "view", *args, "--port", "0"], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, start_new_session=True)  # fmt: skip
-    deadline = time.monotonic() + 90
-    assert proc.stdout is not None
-    while time.monotonic() < deadline:
-        line = proc.stdout.readline()
-        if not line:
-            break
-        if " at http://" in line:
-            return proc, line.split(" at ", 1)[1].split()[0]
-    stop_viewer(proc)
-    raise AssertionError(f"eigs view printed no URL; stderr: {proc.stderr.read() if proc.stderr else ''}")
+class ViewerProcess:
+    """``eigs view ARGS --port 0`` in its own process group; ``url`` is the address it printed. Its output is read
+    by threads (a full pipe never blocks it); :meth:`stop` sends SIGTERM and waits."""
+
+    def __init__(self, *args: str, timeout: float = 90) -> None:
+        self.proc = subprocess.Popen([sys.executable, "-m", "eigs", "view", *args, "--port", "0"],
+                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                     start_new_session=True)  # fmt: skip
+        self.stdout: queue.Queue[str] = queue.Queue()
+        self.stderr: list[str] = []
+        threading.Thread(target=self._pump, args=(self.proc.stdout, self.stdout.put), daemon=True).start()
+        threading.Thread(target=self._pump, args=(self.proc.stderr, self.stderr.append), daemon=True).start()
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline and self.proc.poll() is None:
+            try:
+                line = self.stdout.get(timeout=0.5)
+            except queue.Empty:
+                continue
+            if " at http://" in line:
+                self.url = line.split(" at ", 1)[1].split()[0]
+                return
+        self.stop()
+        raise AssertionError(f"eigs view printed no URL; stderr: {''.join(self.stderr)}")
+
+    @staticmethod
+    def _pump(stream: Any, sink: Any) -> None:
+        for line in stream:
+            sink(line)
+
+    def stop(self, timeout: float = 20) -> int:
+        """SIGTERM and wait; SIGKILL the process group when it does not stop (then fail)."""
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGTERM)
+            try:
+                self.proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                os.killpg(self.proc.pid, signal.SIGKILL)
+                self.proc.wait()
+                raise AssertionError("eigs view did not stop on SIGTERM") from None
+        return self.proc.returncode
 
 
-def stop_viewer(proc: subprocess.Popen, timeout: float = 20) -> int:
-    """SIGTERM the viewer and wait; kill its process group when it does not stop (then fail)."""
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGTERM)
-        try:
-            proc.wait(timeout)
-        except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
-            raise AssertionError("eigs view did not stop on SIGTERM") from None
-    return proc.returncode
-
-
-def test_viewer_serves_its_bundled_client_and_stops_on_sigterm(case):
-    proc, url = start_viewer(str(case["3dgs"]))
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_viewer_serves_its_bundled_client_and_stops_on_a_signal(case, sig):
+    viewer = ViewerProcess(str(case["3dgs"]))
     try:
-        assert url.startswith("http://127.0.0.1:")
-        with urllib.request.urlopen(url, timeout=20) as resp:
+        assert viewer.url.startswith("http://127.0.0.1:")
+        with urllib.request.urlopen(viewer.url, timeout=20) as resp:
             page = resp.read().decode("utf-8", "replace")
-        assert resp.status == 200 and "<div id=\"root\">" in page
+        assert resp.status == 200 and '<div id="root">' in page
+        viewer.proc.send_signal(sig)
+        viewer.proc.wait(20)
     finally:
-        code = stop_viewer(proc)
-    assert code == 0, proc.stderr.read() if proc.stderr else ""
+        code = viewer.stop()
+    assert code == 0, "".join(viewer.stderr)
+    log = "".join(viewer.stderr)
+    assert "b4/3dgs: 3075 Gaussians" in log and "b4/eigs: 3075 Gaussians" in log  # the sibling run, not the field
+    assert "field: a field run (model.npz), not shown" in log and "viewer stopped" in log

@@ -27,7 +27,7 @@ import pytest
 from PIL import Image
 
 from tests.conftest import require
-from tests.test_view import WRONG_DEG, make_view_case, start_viewer, stop_viewer
+from tests.test_view import WRONG_DEG, ViewerProcess, make_view_case
 
 pytestmark = pytest.mark.slow
 
@@ -106,7 +106,8 @@ def test_viewer_in_chromium_matches_eigs_render_and_fails_on_a_wrong_pose(tmp_pa
     assert len(ref) == 3 and ref[0].shape == (240, 320, 3)
 
     outside: list[str] = []
-    proc, url = start_viewer(str(case["3dgs"]), "--camera", "test:0")
+    viewer = ViewerProcess(str(case["3dgs"]), "--camera", "test:0")
+    url = viewer.url
     try:
         with sync_playwright() as pw:
             browser = pw.chromium.launch(executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS)
@@ -138,8 +139,8 @@ def test_viewer_in_chromium_matches_eigs_render_and_fails_on_a_wrong_pose(tmp_pa
             finally:
                 browser.close()
     finally:
-        code = stop_viewer(proc)
-    assert code == 0, proc.stderr.read() if proc.stderr else ""
+        code = viewer.stop()
+    assert code == 0, "".join(viewer.stderr)
     assert outside == [], f"the viewer page asked for outside resources: {outside}"
 
     scores = {
