@@ -74,6 +74,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--frames", metavar="FILE", help="h5: frames sidecar (default: <stem>.frames.txt beside the file)"
     )
     parser.add_argument(
+        "--frames-homography",
+        metavar="FILE",
+        help="raw formats: 3×3 homography from frame pixels to event pixels (frames from a second camera); the "
+        "frames are warped into the event sensor's grid",
+    )
+    parser.add_argument(
+        "--time-offset-us",
+        metavar="N|auto",
+        help="raw formats: frame times are on another clock, t_event = t_frame + N µs; auto (or auto:LO,HI) "
+        "estimates N from the frames' brightness change and the events",
+    )
+    parser.add_argument(
         "--camera-response",
         choices=("linear", "srgb", "unknown"),
         help="frame intensity response (default: what the source states, else unknown)",
@@ -85,6 +97,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def options_from_args(args: argparse.Namespace):  # -> IngestOptions
     """argparse namespace → :class:`eigs.io.options.IngestOptions` (values parsed and checked)."""
     from eigs.io.options import IngestOptions, parse_int_pair, parse_size
+    from eigs.io.sync import parse_time_offset
 
     return IngestOptions(
         name=args.name,
@@ -98,6 +111,8 @@ def options_from_args(args: argparse.Namespace):  # -> IngestOptions
         undistort=args.undistort,
         time_unit=args.time_unit,
         frames=args.frames,
+        frames_homography=args.frames_homography,
+        time_offset_us=None if args.time_offset_us is None else parse_time_offset(args.time_offset_us),
         camera_response=args.camera_response,
         contrast_threshold=args.contrast_threshold,
         compression=args.compression,

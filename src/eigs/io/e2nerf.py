@@ -395,7 +395,11 @@ def read_e2nerf_real(folder: Path, opts: IngestOptions) -> tuple[Scene, list[str
         synthetic=False,
         contrast_threshold=opts.contrast_threshold,
         source=f"e2nerf-real:{folder}",
-        frames=Frames(blurry=blurry, exposure_us=np.tile(np.array(REAL_EXPOSURE_US, np.int64), (n_views, 1))),
+        frames=Frames(
+            blurry=blurry,
+            exposure_us=np.tile(np.array(REAL_EXPOSURE_US, np.int64), (n_views, 1)),
+            names=[p.name for p in img_paths],
+        ),
         binned=BinnedEvents(counts=counts, bin_edges_us=np.tile(REAL_BIN_EDGES_US, (n_views, 1))),
         poses=Poses(latent, np.tile(REAL_LATENT_T_US, (n_views, 1)), "estimated"),
     )
@@ -408,7 +412,9 @@ def select_views(scene: Scene, idx: np.ndarray) -> Scene:
     s = Scene(**scene.__dict__)
     if s.frames is not None:
         ex = s.frames.exposure_us
-        s.frames = Frames(s.frames.blurry[idx], None if ex is None else ex[idx])
+        nm = s.frames.names
+        names = None if nm is None else [nm[i] for i in idx]
+        s.frames = Frames(s.frames.blurry[idx], None if ex is None else ex[idx], names=names)
     if s.binned is not None:
         s.binned = BinnedEvents(s.binned.counts[idx], s.binned.bin_edges_us[idx])
     if s.poses is not None:
@@ -428,7 +434,8 @@ def ingest_e2nerf(fmt: str, source: str, out: str | Path, opts: IngestOptions) -
     """Read an E²NeRF layout and write the scene atomically; returns the summary."""
     from eigs.scene import summarize, write_scene
 
-    opts.refuse(fmt, "exposure_us", "time_window", "keep_events", "groundtruth", "time_unit", "frames", "sensor_size")
+    opts.refuse(fmt, "exposure_us", "time_window", "keep_events", "groundtruth", "time_unit", "frames", "sensor_size",
+                "frames_homography", "time_offset_us")
     folder = Path(source)
     if fmt == "e2nerf-synthetic":
         scene, notes = read_e2nerf_synthetic(folder, opts)

@@ -20,6 +20,7 @@ event clock after ``t_offset``; image paths relative to the sidecar).
 from __future__ import annotations
 
 import logging
+import os
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -307,9 +308,11 @@ def open_h5_source(source: str, opts: IngestOptions) -> RawSource:
         t, exposure, files = read_sidecar(sidecar)
         first = read_image(files[0])
         fh, fw = first.shape[:2]
-        if width is not None and (fw, fh) != (width, height):
-            raise EigsError(sidecar, f"frames are {fw}×{fh} but {path.name} says {width}×{height}")
-        src.width, src.height = fw, fh
+        if opts.frames_homography is None:  # else the frames are another camera's, warped to the sensor later
+            if width is not None and (fw, fh) != (width, height):
+                raise EigsError(sidecar, f"frames are {fw}×{fh} but {path.name} says {width}×{height}")
+            src.width, src.height = fw, fh
+        src.frame_names = [Path(os.path.relpath(f, sidecar.parent)).as_posix() for f in files]
         src.n_frames = len(files)
         src.exposure_us = exposure
         src.frame_t_us = t if t is not None else None

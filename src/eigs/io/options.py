@@ -36,6 +36,8 @@ class IngestOptions:
     undistort: bool = True
     time_unit: str | None = None
     frames: str | None = None
+    frames_homography: str | None = None  # file: 3×3 frame→event pixel homography (eigs.io.sync)
+    time_offset_us: int | tuple | None = None  # t_event = t_frame + N, or ("auto", (lo, hi) | None) (eigs.io.sync)
     camera_response: str | None = None
     contrast_threshold: float | None = None
     compression: str | None = None

@@ -41,6 +41,7 @@ class RawSource:
     ``load_frames(indices)``: (M,) int64 source view indices → (M, H, W, C) uint8; ``events()``: iterator of
     time-ordered chunks (x, y uint16 sensor pixels checked against the sensor size; t int64 µs; p int8 ±1);
     ``n_events``: total for the progress bar (None when unknown). ``K`` uses our pixel-centre convention.
+    With ``--frames-homography`` the frames may have another size than the sensor (they are warped onto it).
     """
 
     path: Path
@@ -58,6 +59,7 @@ class RawSource:
     events: Callable[[int, int], Iterator[EventChunk]] | None = None
     n_events: int | None = None
     trajectory: Trajectory | None = None
+    frame_names: list[str] | None = None  # (V,) the source's name of each frame (image path as listed)
     notes: list[str] = field(default_factory=list)
 
 
@@ -147,6 +149,52 @@ def _views(src: RawSource, opts: IngestOptions, exposure: np.ndarray | None) -> 
     return idx
 
 
+def _apply_time_offset(
+    src: RawSource, opts: IngestOptions, exposure: np.ndarray | None, homography: np.ndarray | None, width: int,
+    height: int,
+) -> np.ndarray | None:  # fmt: skip
+    """Move the frame times onto the event clock (t_event = t_frame + offset): ``src.frame_t_us`` in place, the
+    exposures returned. ``--time-offset-us auto`` estimates the offset first (:mod:`eigs.io.sync`) from the
+    frames selected by ``--views`` (all by default) and one extra pass over the events."""
+    from eigs.io import sync
+
+    if src.frame_t_us is None and exposure is None:
+        raise EigsError("--time-offset-us", f"{src.path} has no frame times to move")
+    off = opts.time_offset_us
+    if isinstance(off, tuple):
+        if src.events is None or src.load_frames is None:
+            raise EigsError("--time-offset-us", f"auto needs frames and events; {src.path} lacks one of them")
+        idx = np.arange(src.n_frames) if opts.views is None else parse_views(opts.views, src.n_frames)
+        frames = src.load_frames(idx)
+        if homography is not None:
+            import cv2
+
+            h, w = frames.shape[1:3]
+            frames, _ = sync.warp_frames(frames, homography, width, height)
+            mask = cv2.warpPerspective(np.full((h, w), 255, np.uint8), homography, (width, height),
+                                       flags=cv2.INTER_NEAREST) > 0  # fmt: skip
+        elif frames.shape[1:3] != (height, width):
+            raise EigsError("--time-offset-us", "auto compares frames and events pixel by pixel: frames of another "
+                            "size than the sensor need --frames-homography")  # fmt: skip
+        else:
+            mask = np.ones((height, width), bool)
+        if exposure is not None:
+            mid = (exposure[idx, 0] + exposure[idx, 1]) // 2
+            length = float(np.median(exposure[idx, 1] - exposure[idx, 0]))
+        else:
+            mid, length = src.frame_t_us[idx], None
+        ev = sync.gather_events(src.events(width, height), width, height, sync.sample_pixels(mask), src.n_events)
+        est = sync.estimate_time_offset(frames, mid, ev, exposure_len_us=length, search_us=off[1], where=src.path)
+        log.info(est.describe())
+        src.notes.append(est.describe())
+        off = est.offset_us
+    else:
+        src.notes.append(f"frame times moved onto the event clock by --time-offset-us {off}")
+    if src.frame_t_us is not None:
+        src.frame_t_us = src.frame_t_us + int(off)
+    return None if exposure is None else exposure + int(off)
+
+
 def ingest_raw(src: RawSource, out: str | Path, opts: IngestOptions) -> str:
     """Write the scene of ``src`` to ``out`` (atomically) following ``opts``; returns the summary text."""
     from eigs.io.summary import ingest_summary
@@ -155,6 +203,12 @@ def ingest_raw(src: RawSource, out: str | Path, opts: IngestOptions) -> str:
     from eigs.util.progress import progress
 
     K, dist, width, height, calib_desc = _camera(src, opts)
+    homography = None
+    if opts.frames_homography is not None:
+        from eigs.io.sync import parse_homography
+
+        homography = parse_homography(opts.frames_homography)
+        src.notes.append(f"frames warped onto the {width}×{height} event sensor by {opts.frames_homography}")
 
     # exposures
     exposure = src.exposure_us
@@ -165,6 +219,8 @@ def ingest_raw(src: RawSource, out: str | Path, opts: IngestOptions) -> str:
             raise EigsError("--exposure-us", f"{src.path} has no frame timestamps to add the offsets to")
         exposure = src.frame_t_us[:, None] + np.asarray(opts.exposure_us, dtype=np.int64)[None, :]
 
+    if opts.time_offset_us is not None:
+        exposure = _apply_time_offset(src, opts, exposure, homography, width, height)
     views = _views(src, opts, exposure)
     frame_t_kept = None
     if exposure is None and views.size:
@@ -199,6 +255,13 @@ def ingest_raw(src: RawSource, out: str | Path, opts: IngestOptions) -> str:
     if views.size:
         assert src.load_frames is not None
         blurry = src.load_frames(views)
+        if homography is not None:
+            from eigs.io.sync import warp_frames
+
+            blurry, coverage = warp_frames(blurry, homography, width, height)
+            if coverage == 0:
+                raise EigsError(opts.frames_homography, "the homography maps the frames outside the event sensor")
+            src.notes.append(f"the warped frames cover {100 * coverage:.1f} % of the event sensor (black elsewhere)")
         if blurry.shape[1:3] != (height, width):
             raise EigsError(
                 src.path, f"frames are {blurry.shape[2]}×{blurry.shape[1]} but the sensor is {width}×{height}"
@@ -206,7 +269,8 @@ def ingest_raw(src: RawSource, out: str | Path, opts: IngestOptions) -> str:
         channels = int(blurry.shape[3])
         if undistorter is not None:
             blurry = undistorter.frames(blurry)
-        frames = Frames(blurry=blurry, exposure_us=exposure_kept, t_us=frame_t_kept)
+        names = None if src.frame_names is None else [src.frame_names[i] for i in views]
+        frames = Frames(blurry=blurry, exposure_us=exposure_kept, t_us=frame_t_kept, names=names)
 
     header = Scene(
         name=opts.name or src.name,

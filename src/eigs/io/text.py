@@ -14,6 +14,7 @@ A folder (or an event file inside one) holding any of:
 from __future__ import annotations
 
 import logging
+import os
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -208,8 +209,10 @@ def open_text_source(source: str, opts: IngestOptions) -> RawSource:
         if not files:
             raise EigsError(images_txt, "lists no frames")
         first = read_image(files[0])
-        src.height, src.width = first.shape[:2]
+        if opts.frames_homography is None:  # else another camera's frames, warped to the sensor later
+            src.height, src.width = first.shape[:2]
         src.n_frames = len(files)
+        src.frame_names = [Path(os.path.relpath(f, images_txt.parent)).as_posix() for f in files]
         src.frame_t_us = t
 
         def load(idx: np.ndarray) -> np.ndarray:

@@ -136,6 +136,8 @@ class SceneWriter:
                 g.create_dataset("exposure_us", data=s.frames.exposure_us)
             if s.frames.t_us is not None:
                 g.create_dataset("t_us", data=s.frames.t_us)
+            if s.frames.names is not None:
+                g.create_dataset("names", data=list(s.frames.names), dtype=h5py.string_dtype())
         if s.binned is not None:
             self._ds("events/binned", s.binned.counts)
             self._f.create_dataset("events/bin_edges_us", data=s.binned.bin_edges_us)
@@ -228,8 +230,12 @@ def _read_header(f: h5py.File, binned: bool = True) -> Scene:
     )
     frames = None
     if "frames" in f:
+        names = f["frames/names"].asstr()[()].tolist() if "frames/names" in f else None
         frames = Frames(
-            blurry=f["frames/blurry"][()], exposure_us=_opt(f, "frames/exposure_us"), t_us=_opt(f, "frames/t_us")
+            blurry=f["frames/blurry"][()],
+            exposure_us=_opt(f, "frames/exposure_us"),
+            t_us=_opt(f, "frames/t_us"),
+            names=names,
         )
     counts = None
     if binned and "events/binned" in f:

@@ -44,11 +44,14 @@ class Frames:
     """Motion-blurred frames. ``blurry``: (V, H, W, C) uint8, C ∈ {1, 3} (RGB);
     ``exposure_us``: (V, 2) int64 [start, end) per view, or None when the source does not know it;
     ``t_us``: (V,) int64 timestamp of each frame when there is no exposure window (the frame is then an instant),
-    else None. At most one of the two is set."""
+    else None. At most one of the two is set. ``names``: (V,) the source's name of each frame (its image path as
+    the source lists it, e.g. ``images/frame_000012.png``), or None; an existing COLMAP model's images are matched
+    to the views by it (``sfm: mode: model``)."""
 
     blurry: np.ndarray
     exposure_us: np.ndarray | None = None
     t_us: np.ndarray | None = None
+    names: list[str] | None = None
 
     @property
     def n_views(self) -> int:

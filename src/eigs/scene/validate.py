@@ -172,6 +172,11 @@ def validate_header(path: str, scene: Scene) -> None:
                 raise EigsError(path, "frames/t_us is for frames without exposure windows, but exposure_us is set too")
             _dtype(path, "frames/t_us", f.t_us, np.int64)
             _shape(path, "frames/t_us", f.t_us, (f.n_views,))
+        if f.names is not None:
+            if len(f.names) != f.n_views or not all(isinstance(n, str) and n for n in f.names):
+                raise EigsError(path, f"frames/names must hold one non-empty name per frame ({f.n_views})")
+            if len(set(f.names)) != len(f.names):
+                raise EigsError(path, "frames/names must be unique")
     if scene.binned is not None:
         b = scene.binned
         _dtype(path, "events/binned", b.counts, np.int32)
