@@ -281,7 +281,8 @@ def test_ledger_is_a_run_for_suite_report_and_eigs_tables(workflow, tmp_path, ca
     # Tables I-V with the workflow's row mapping (eigs.tables.rows.configured_rows, which rule tables passes)
     mapping = configured_rows(None, yaml.safe_load(cfg.read_text())["runs"])
     assert mapping["table1"]["3dgs"] == "3dgs" and mapping["table1"]["eigs"] == "eigs"
-    assert mapping["table1"]["e2gs"] is None and mapping["table2"]["ours"] is None  # eigs+ is not configured
+    assert mapping["table1"]["e2gs"] is None and mapping["table3"]["4"] is None  # eigs+ is not configured
+    assert mapping["table2"]["ours"] == "eigs" and "ladder" not in mapping  # no ladder run: no ladder table
     code, out, err = ledger_main("tables", "--config", cfg, "--ledger", ledger, capsys=capsys)
     assert code == 0, err
     per_scene = list(csv.DictReader((ledger / "tables" / "per_scene.csv").open()))

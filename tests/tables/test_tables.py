@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 import re
 
 import pytest
@@ -227,3 +228,28 @@ def test_a_run_missing_on_a_scene_averages_the_scenes_it_has(metrics_files, tmp_
     assert main(["tables", *map(str, files), "--tables", mapping, "-o", str(out)]) == 0
     per = list(csv.DictReader((out / "per_scene.csv").open()))
     assert len(per) == len(files) and [r["scene"] for r in per if r["run"] == "e2gs"] == ["alpha"]
+
+
+def test_the_ladder_table_exists_only_with_its_own_runs():
+    from eigs.tables.rows import configured_rows
+
+    base = ["eigs", "eigs+", "oracle", "3dgs"]
+    assert "ladder" not in configured_rows(None, base)  # eigs and eigs+ alone are Tables I-V's rows
+    rows = configured_rows(None, [*base, "eigs-zero"])["ladder"]
+    assert rows["eigs"] == "eigs" and rows["zero"] == "eigs-zero" and rows["discrete"] is None
+    assert rows["latent"] == "eigs+"
+
+
+def test_motion_columns_are_the_means_over_the_scenes_with_motion(tmp_path):
+    files = []
+    for scene, err in (("alpha", 0.2), ("beta", 0.4), ("gamma", None)):
+        path = write_metrics(tmp_path, "eigs", scene, "eigs", 25.0, 0.9, 0.1, 10.0)
+        doc = json.loads(path.read_text())
+        doc["motion"] = None if err is None else {"displacement_relative_error": err, "displacement_cosine": 0.9}
+        path.write_text(json.dumps(doc))
+        files.append(path)
+    s = summarise(files)["eigs"]
+    assert s.values["motion_err"] == pytest.approx(0.3) and s.values["motion_cos"] == pytest.approx(0.9)
+    assert math.isnan(s.values["motion_rot_deg"])  # no trajectory: no camera error
+    t1 = build_tables({"table1": {"eigs": "eigs"}}, summarise(files))[0]
+    assert row(t1, "eigs").cells["motion_err"].ours == pytest.approx(0.3)
