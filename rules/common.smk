@@ -68,26 +68,46 @@ def ingest_options(wildcards):
 ALL_SCENES = sorted(SCENES)
 
 
+def scene_sfm(scene):
+    """The `sfm:` keys of a scene: the global section with the scene's own `sfm:` over it; `{scene}` in `path` is
+    the scene name. Mode model without a path is a config error naming the scene."""
+    values = {**config.get("sfm", {}), **SCENES[scene].get("sfm", {})}
+    if "path" in values:
+        values["path"] = values["path"].replace("{scene}", scene)
+    if values.get("mode") == "model" and not values.get("path"):
+        raise ValueError(f"config: scene {scene}: sfm mode model needs `path` (the COLMAP model directory)")
+    return values
+
+
 def sfm_given_scenes():
     """Built-in scenes whose SfM job uses their ground-truth poses instead of COLMAP (the sfm_given jobs); `sfm: mode:
     given`, or `auto` with `allow_given` (defaults: eigs.sfm.options.SfmConfig). A built-in scene stores
     ground-truth latent poses, so `eigs sfm` in auto mode would pick given poses anyway (eigs.sfm.run.resolve_mode);
     their own rule shows the skipped COLMAP mapping in a dry run. Ingested scenes keep the sfm jobs (auto
     mode decides from the file)."""
-    section, default = config.get("sfm", {}), SfmConfig()
-    mode = section.get("mode", default.mode)
-    if mode == "given" or (mode == "auto" and section.get("allow_given", default.allow_given)):
-        return BUILTIN_SCENES
-    return []
+    default = SfmConfig()
+    out = []
+    for s in BUILTIN_SCENES:
+        section = scene_sfm(s)
+        mode = section.get("mode", default.mode)
+        if mode == "given" or (mode == "auto" and section.get("allow_given", default.allow_given)):
+            out.append(s)
+    return out
 
 
+SFM_MODEL_SCENES = [s for s in ALL_SCENES if scene_sfm(s).get("mode") == "model"]  # rule sfm_model
 SFM_GIVEN_SCENES = sfm_given_scenes()
-SFM_COLMAP_SCENES = [s for s in ALL_SCENES if s not in SFM_GIVEN_SCENES]
+SFM_COLMAP_SCENES = [s for s in ALL_SCENES if s not in SFM_GIVEN_SCENES and s not in SFM_MODEL_SCENES]
 
 
 def sfm_config(wildcards):
-    """The `sfm:` section for `eigs sfm --config` (defaults: eigs.sfm.options.SfmConfig)."""
-    return section_json("sfm")
+    """The scene's `sfm:` keys for `eigs sfm --config` (defaults: eigs.sfm.options.SfmConfig)."""
+    return config_json(scene_sfm(wildcards.scene))
+
+
+def sfm_model_path(wildcards):
+    """Mode model: the scene's COLMAP model directory (an input, so a changed model reruns the job)."""
+    return scene_sfm(wildcards.scene)["path"]
 
 
 def init_config(wildcards):

@@ -55,6 +55,35 @@ rule sfm_given:
         "--mode given --threads {threads} > {log} 2>&1"
 
 
+# Scenes whose poses come from an existing COLMAP model (`sfm: {mode: model, path: DIR}`, globally or per scene;
+# common.smk SFM_MODEL_SCENES): no COLMAP mapping; the model's poses, matched to the views by name (docs/sfm.md).
+rule sfm_model:
+    input:
+        scene="results/{scene}/scene.h5",
+        edi="results/{scene}/b{bins}/edi.h5",
+        latent="results/{scene}/b{bins}/latent",
+        model=sfm_model_path,
+    output:
+        directory("results/{scene}/b{bins}/sfm"),
+    wildcard_constraints:
+        scene=names_regex(SFM_MODEL_SCENES),
+        bins=r"\d+",
+    params:
+        config=sfm_config,
+    log:
+        "logs/sfm/{scene}_b{bins}.log",
+    benchmark:
+        "benchmarks/sfm/{scene}_b{bins}.tsv"
+    threads: threads_for("sfm")
+    resources:
+        mem_mb=6000,
+    conda:
+        "../workflow/envs/eigs.yaml"
+    shell:
+        "eigs sfm {input.scene} {input.edi} --latent-dir {input.latent} -o {output} --config {params.config} "
+        "--mode model --model {input.model} --threads {threads} > {log} 2>&1"
+
+
 rule init:
     input:
         "results/{scene}/b{bins}/sfm",

@@ -22,7 +22,7 @@ from eigs.util.atomic import atomic_path
 POSES_FORMAT = "eigs-sfm-poses"
 TEST_FORMAT = "eigs-sfm-test-cameras"
 FORMAT_VERSION = 1
-MODES = ("colmap", "given")
+MODES = ("colmap", "given", "model")
 # how a test camera's pose was obtained
 METHOD_REGISTERED = 0  # registered into the frozen model (2-D–3-D matches, absolute pose)
 METHOD_FALLBACK = 1  # the ground-truth pose mapped into the model frame by the Sim(3)
@@ -40,7 +40,8 @@ class LatentPoses:
     - ``interpolated``: (V, L) bool, filled from registered latents of the same view.
     - ``sharp``: (V,) bool, views EDI marked sharp: one image, its pose copied to every slot.
     - ``K``: (3, 3) intrinsics (pixel centres at j+0.5); ``width``, ``height`` in pixels.
-    - ``mode``: ``colmap`` or ``given``; ``canonical``: (4, 4) similarity source → canonical frame.
+    - ``mode``: ``colmap``, ``given`` or ``model`` (an existing COLMAP model's poses); ``canonical``: (4, 4)
+      similarity source → canonical frame.
     """
 
     c2w: np.ndarray

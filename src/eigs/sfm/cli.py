@@ -23,9 +23,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--mode",
         choices=MODES,
-        help=f"auto: given when the scene's latent poses are ground truth (and allowed), else colmap "
-        f"(default {_D.mode})",
+        help=f"auto: given when the scene's latent poses are ground truth (and allowed), else colmap; model: the poses "
+        f"of an existing COLMAP model (--model DIR) (default {_D.mode})",
     )
+    p.add_argument("--model", dest="path", metavar="DIR", help="mode model: the COLMAP sparse model (binary or text)")
+    p.add_argument("--intrinsics-tolerance", type=float, metavar="T",
+                   help="mode model: relative tolerance on the model's intrinsics "
+                   f"(default {_D.intrinsics_tolerance})")  # fmt: skip
     p.add_argument("--no-given", dest="allow_given", action="store_const", const=False,
                    help="auto mode never picks given poses")  # fmt: skip
     p.add_argument("--matcher", choices=MATCHERS, help="auto: exhaustive up to 150 images, else sequential + "

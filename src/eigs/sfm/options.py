@@ -10,7 +10,7 @@ from typing import Any
 
 from eigs.errors import EigsError
 
-MODES = ("auto", "colmap", "given")
+MODES = ("auto", "colmap", "given", "model")
 MATCHERS = ("auto", "exhaustive", "sequential")
 
 
@@ -42,13 +42,17 @@ class ColmapOptions:
 @dataclass
 class SfmConfig:
     """Stage options. ``mode``: auto (given when the scene's latent poses are ground truth and ``allow_given``,
-    else colmap) | colmap | given; ``min_registered_fraction``: of the images given to COLMAP, below which the
+    else colmap) | colmap | given | model (the poses of an existing COLMAP model at ``path``, checked against the
+    scene's K within ``intrinsics_tolerance``: eigs.sfm.model); ``min_registered_fraction``: of the images given
+    to COLMAP, below which the
     stage stops; ``interpolate_unregistered``: fill unregistered latents from registered latents of the same
     view; ``register_test_cameras``: register the ground-truth sharp images into the model (else the Sim(3)-mapped
     ground truth). ``keep_work``, ``verbose`` and ``plot`` are run control, not config options."""
 
     mode: str = "auto"
     allow_given: bool = True
+    path: str | None = None  # model mode: the COLMAP sparse model directory
+    intrinsics_tolerance: float = 0.01  # model mode: relative focal, principal point (fraction of the size)
     min_registered_fraction: float = 0.5
     interpolate_unregistered: bool = True
     register_test_cameras: bool = True

@@ -43,7 +43,11 @@ class _Timer:
 def resolve_mode(cfg: SfmConfig, scene, path: str) -> tuple[str, str]:
     """``(mode, reason)``; raises when ``given`` is requested but the scene has no poses."""
     if cfg.mode not in MODES:
-        raise EigsError(None, f"unknown mode {cfg.mode!r} (auto, colmap or given)")
+        raise EigsError(None, f"unknown mode {cfg.mode!r} (auto, colmap, given or model)")
+    if cfg.mode == "model":
+        if not cfg.path:
+            raise EigsError(path, "mode model needs the COLMAP model directory (sfm: path, or --model DIR)")
+        return "model", f"requested: the poses of the COLMAP model {cfg.path}"
     has_gt = scene.poses is not None and scene.poses.source == "ground-truth"
     if cfg.mode == "given":
         if scene.poses is None and scene.trajectory is None:
@@ -123,6 +127,8 @@ def run_sfm(
         "latent_per_view": lat.per_view,
         "sharp_views": [int(v) for v in np.flatnonzero(edi.sharp)],
     }
+    if mode == "model":
+        return _run_model(scene, edi, lat, latent_dir, edi_path, out_dir, cfg, timer, report)
     with atomic_path(out_dir, directory=True) as tmp:
         work = tmp / "work"
         work.mkdir()
@@ -199,11 +205,62 @@ def _features(db: Path, ldir: Path, lat: _Latents, cam, opts: ColmapOptions, tim
     return name_to_id, cm.pixel_scale(opts, cam.width, cam.height)
 
 
-def _given_reconstruction(scene, scene_path, edi, db, ldir, work, lat, name_to_id, px, cfg, timer, report):
-    """Given mode: matches guided by the known poses, then points triangulated with the poses fixed."""
+def _run_model(scene, edi, lat, latent_dir, edi_path, out_dir, cfg, timer, report) -> dict:
+    """Model mode (eigs.sfm.model): the poses of the user's COLMAP model, matched to the views by name; its points
+    when it has some, else points triangulated from the latent frames at those poses (the given-mode path). No
+    mapping, no registration; test cameras from the Sim(3) to ground truth when the scene has some."""
+    from dataclasses import replace
+
+    from eigs.sfm.model import model_poses
+    from eigs.util.atomic import atomic_path
+
+    with timer("read model"):
+        mp = model_poses(cfg.path, scene, edi.timestamps_us, edi.sharp, cfg.intrinsics_tolerance)
+    report["model"] = mp.report
+    registered = np.ones((lat.n_views, lat.per_view), bool)
+    report["registration"] = {"images": len(lat.names), "registered": len(lat.names), "fraction": 1.0,
+                              "unregistered": [], "rejected_far_from_view": []}  # fmt: skip
+    with atomic_path(out_dir, directory=True) as tmp:
+        work = tmp / "work"
+        work.mkdir()
+        if mp.reconstruction.num_points3D() > 0:
+            rec = mp.reconstruction
+            report["model"]["points_from"] = "the model"
+        else:
+            ldir = _latent_images(latent_dir, edi_path, lat, scene.camera, work)
+            db = work / "database.db"
+            name_to_id, px = _features(db, ldir, lat, scene.camera, cfg.colmap, timer, report)
+            rec, _ = _given_reconstruction(scene, None, edi, db, ldir, work, lat, name_to_id, px, cfg, timer, report,
+                                           poses=mp.latent_c2w)  # fmt: skip
+            _drop_points(rec, lat, report)
+            report["model"]["points_from"] = "triangulated from the latent frames at the model's poses"
+        canon, c2w = _canonical_frame(rec, mp.latent_c2w, registered, report)
+        report["model"]["canonical_scale"] = canon.scale
+        c2w, interpolated = _fill_unregistered(c2w, registered, edi.timestamps_us, cfg, report)
+        if "points" not in report:
+            report["points"] = {"count": int(rec.num_points3D()), "removed_single_view": 0,
+                                "mean_reprojection_error_px": float(rec.compute_mean_reprojection_error())}  # fmt: skip
+        gt, est_to_gt = _ground_truth_accuracy(scene, edi, c2w, registered, report)
+        tc = None
+        if scene.sharp is not None and len(scene.sharp.t_us):
+            with timer("test cameras"):
+                no_reg = replace(cfg, register_test_cameras=False)
+                tc, report["test_cameras"] = _test_cameras(scene, rec, None, work, "model", canon, est_to_gt, no_reg,
+                                                           cfg.colmap)  # fmt: skip
+        _write_outputs(tmp, rec, scene, edi, c2w, registered, interpolated, "model", canon, tc, gt, est_to_gt, cfg,
+                       timer, report)  # fmt: skip
+        shutil.rmtree(work, ignore_errors=True)
+    log.info("wrote %s", out_dir)
+    return report
+
+
+def _given_reconstruction(scene, scene_path, edi, db, ldir, work, lat, name_to_id, px, cfg, timer, report,
+                          poses=None):  # fmt: skip
+    """Given mode: matches guided by the known poses, then points triangulated with the poses fixed. ``poses``:
+    (V, L, 4, 4) latent poses to use instead of the scene's (model mode)."""
     from eigs.sfm.given import guided_match, triangulate
 
-    got = _given_poses(scene, edi.timestamps_us, scene_path)
+    got = _given_poses(scene, edi.timestamps_us, scene_path) if poses is None else poses
     c2w_by_name = {n: got[v, k] for (v, k), n in zip(lat.slots, lat.names, strict=True)}
     cam = scene.camera
     with timer("matching (epipolar-guided, known poses)"):
