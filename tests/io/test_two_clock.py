@@ -96,3 +96,50 @@ def test_bad_time_offset(pair, tmp_path, capsys):
     err = expect_failure(capsys, "h5", pair.h5, tmp_path / "s.h5", "--frames-homography", str(pair.homography),
                          "--time-offset-us", "auto:5000000,6000000", "--intrinsics", INTRINSICS)  # fmt: skip
     assert "no offset in [5000000, 6000000] µs" in err
+
+
+def test_the_synchronised_scene_trains(pair, tmp_path):
+    """The whole chain on the ingested pair (homography, the offset given: its estimate is tested above): EDI, SfM
+    in model mode from a COLMAP
+    model written with the simulated camera poses (named after the sidecar's frames), init, a short training."""
+    import json
+
+    import pycolmap
+
+    from eigs.artifacts.poses import read_poses
+    from eigs.cli import main
+    from tests.io.two_clock import DEPTH
+
+    scene = tmp_path / "scene.h5"
+    assert run_ingest("h5", pair.h5, scene, "--frames-homography", str(pair.homography), "--time-offset-us",
+                      str(OFFSET), "--intrinsics", INTRINSICS) == 0  # fmt: skip
+    edi = tmp_path / "b2" / "edi.h5"
+    assert main(["edi", str(scene), "-o", str(edi), "--bins", "2", "--latent-dir", str(tmp_path / "b2" / "latent"),
+                 "--threads", "1"]) == 0  # fmt: skip
+    # the model: the event camera's K (COLMAP's pixel convention is ours), one image per frame, points on the plane
+    rec = pycolmap.Reconstruction()
+    cx, cy = (EW - 1) / 2 + 0.5, (EH - 1) / 2 + 0.5
+    rec.add_camera_with_trivial_rig(pycolmap.Camera(model="PINHOLE", width=EW, height=EH,
+                                                    params=[FOCAL, FOCAL, cx, cy], camera_id=1))  # fmt: skip
+    for v, name in enumerate(pair.names):
+        w2c = np.linalg.inv(pair.c2w_mid[v])
+        img = pycolmap.Image(name=name.split("/")[-1], camera_id=1, image_id=v + 1)
+        rec.add_image_with_trivial_frame(img, pycolmap.Rigid3d(pycolmap.Rotation3d(w2c[:3, :3]), w2c[:3, 3]))
+    rng = np.random.default_rng(0)
+    for xy in rng.uniform(-3, 3, (300, 2)):
+        rec.add_point3D(np.array([xy[0], xy[1], DEPTH]), pycolmap.Track(), np.array([128, 128, 128], np.uint8))
+    model = tmp_path / "sparse"
+    model.mkdir()
+    rec.write(str(model))
+    sfm = tmp_path / "b2" / "sfm"
+    assert main(["sfm", str(scene), str(edi), "-o", str(sfm), "--mode", "model", "--model", str(model),
+                 "--no-plot"]) == 0  # fmt: skip
+    poses = read_poses(sfm)
+    assert poses.mode == "model" and poses.valid.all()
+    init = tmp_path / "b2" / "init.ply"
+    assert main(["init", str(sfm), "-o", str(init), "--min-points", "100"]) == 0
+    run = tmp_path / "b2" / "run"
+    assert main(["train", str(scene), str(edi), str(sfm), str(init), "-o", str(run), "--method", "3dgs",
+                 "--steps", "5", "--device", "cpu"]) == 0  # fmt: skip
+    assert (run / "model.ply").is_file()
+    assert json.loads((sfm / "report.json").read_text())["model"]["matched"] == 40
