@@ -51,9 +51,19 @@ def _ros_time(ts, us: int):
     return ts.types["builtin_interfaces/msg/Time"](sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
 
-def write_bag(s, path, ros1: bool, pkg: str = "dvs_msgs", exposure: bool = True, extra_events: bool = False):
-    """rpg_dvs_ros layout: /dvs/events (EventArray, 1000 events per message), /dvs/image_raw (stamp = exposure
-    midpoint), /dvs/exposure (Int32 µs after each image), /dvs/camera_info."""
+def write_bag(
+    s,
+    path,
+    ros1: bool,
+    pkg: str = "dvs_msgs",
+    exposure: bool = True,
+    extra_events: bool = False,
+    storage: str = "sqlite3",
+    per_message: int = 1000,
+):
+    """rpg_dvs_ros layout: /dvs/events (EventArray, ``per_message`` events per message), /dvs/image_raw (stamp =
+    exposure midpoint), /dvs/exposure (Int32 µs after each image), /dvs/camera_info. ROS 2 bags are stored as
+    ``storage`` (``sqlite3`` or ``mcap``)."""
     ts = typestore(ros1=ros1)
     T = ts.types
     Header = T["std_msgs/msg/Header"]
@@ -75,8 +85,8 @@ def write_bag(s, path, ros1: bool, pkg: str = "dvs_msgs", exposure: bool = True,
     msgs = []  # (time µs, topic, type, message)
     ev_type, arr_type = f"{pkg}/msg/Event", f"{pkg}/msg/EventArray"
     ev = s.events
-    for a in range(0, ev.t.size, 1000):
-        sl = slice(a, a + 1000)
+    for a in range(0, ev.t.size, per_message):
+        sl = slice(a, a + per_message)
         events = [
             T[ev_type](x=int(x), y=int(y), ts=_ros_time(ts, int(t)), polarity=bool(p > 0))
             for x, y, t, p in zip(ev.x[sl], ev.y[sl], ev.t[sl], ev.p[sl], strict=True)
@@ -99,9 +109,10 @@ def write_bag(s, path, ros1: bool, pkg: str = "dvs_msgs", exposure: bool = True,
 
         w = Writer(path)
     else:
-        from rosbags.rosbag2 import Writer
+        from rosbags.rosbag2 import StoragePlugin, Writer
 
-        w = Writer(path, version=9)
+        plugin = {"sqlite3": StoragePlugin.SQLITE3, "mcap": StoragePlugin.MCAP}[storage]
+        w = Writer(path, version=9, storage_plugin=plugin)
     with w:
         conns = {}
         for _, topic, typ, _ in msgs:
@@ -195,3 +206,37 @@ def test_not_a_bag(tmp_path, capsys):
     f.write_bytes(b"hello")
     err = expect_failure(capsys, "rosbag", f, tmp_path / "s.h5")
     assert "not a readable ROS bag" in err
+
+
+def test_cut_sqlite_database(scene, tmp_path, capsys):
+    """SQLite reads pages past a cut file's end as zeros: a cut .db3 decoded to zero-tailed messages (found by
+    tests/stress/test_rosbag_fuzz.py); the header's page count now refuses it."""
+    bag = tmp_path / "b"
+    write_bag(scene, bag, False)
+    db = bag / "b.db3"
+    data = db.read_bytes()
+    db.write_bytes(data[: len(data) - 100])
+    err = expect_failure(capsys, "rosbag", bag, tmp_path / "s.h5")
+    assert f"{bag}: b.db3 is truncated: its header says {len(data) // 4096} pages of 4096 bytes" in err, err
+
+
+@pytest.mark.parametrize("topic", ["/dvs/events", "/dvs/image_raw", "/dvs/exposure"])
+def test_deleted_sqlite_row(scene, tmp_path, capsys, topic):
+    """A row deleted from a ROS 2 bag's messages table: metadata.yaml still counts it, so the topic is short by
+    one; before, the events or frames silently lost a message."""
+    import sqlite3
+
+    bag = tmp_path / "b"
+    write_bag(scene, bag, False)
+    con = sqlite3.connect(bag / "b.db3")
+    n = con.execute("SELECT COUNT(*) FROM messages JOIN topics ON topic_id = topics.id WHERE name = ?", (topic,))
+    n = n.fetchone()[0]
+    con.execute(
+        "DELETE FROM messages WHERE id = (SELECT MAX(messages.id) FROM messages JOIN topics ON topic_id = topics.id "
+        "WHERE name = ?)",
+        (topic,),
+    )
+    con.commit()
+    con.close()
+    err = expect_failure(capsys, "rosbag", bag, tmp_path / "s.h5")
+    assert f"{bag}: {topic}: the bag lists {n} messages but holds {n - 1}" in err, err

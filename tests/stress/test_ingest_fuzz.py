@@ -1,7 +1,7 @@
-"""Fuzzed recordings for the binary ingest readers of issue #33 (Prophesee RAW/DAT, AEDAT 2.0/3.1, NumPy, ROS 1
-bags): truncated or corrupted bytes give either a valid scene or one :class:`~eigs.errors.EigsError` whose single
-line starts with the file's path — never another exception — and no output file (complete or partial) after an
-error. Same damage model as :mod:`tests.stress.test_readers_fuzz`."""
+"""Fuzzed recordings for the binary ingest readers of issue #33 (Prophesee RAW/DAT, AEDAT 2.0/3.1, NumPy; ROS
+bags are in :mod:`tests.stress.test_rosbag_fuzz`): truncated or corrupted bytes give either a valid scene or one
+:class:`~eigs.errors.EigsError` whose single line starts with the file's path — never another exception — and no
+output file (complete or partial) after an error. Same damage model as :mod:`tests.stress.test_readers_fuzz`."""
 
 from __future__ import annotations
 

@@ -99,6 +99,9 @@ class _Bag:
         from rosbags.highlevel import AnyReader
 
         self.path = path
+        if path.is_dir():
+            for db in sorted(path.glob("*.db3")):
+                check_sqlite_size(path, db)
         try:
             self.reader = AnyReader([path], default_typestore=typestore())
             self.reader.open()
@@ -121,8 +124,10 @@ class _Bag:
         return sum(c.msgcount for c in self.topics[topic][1])
 
     def messages(self, topic: str) -> Iterator[tuple[int, Any]]:
-        """(index, deserialized message) of ``topic`` in log-time order."""
+        """(index, deserialized message) of ``topic`` in log-time order; the count read must be the bag's count
+        (ROS 1 connection index, ROS 2 ``metadata.yaml``): rows missing from or added to the storage are errors."""
         conns = self.topics[topic][1]
+        expected = self.count(topic)
         it = self.reader.messages(connections=conns)
         k = 0
         while True:
@@ -130,6 +135,11 @@ class _Bag:
                 conn, _, raw = next(it)
                 msg = self.reader.deserialize(raw, conn.msgtype)
             except StopIteration:
+                if k != expected:
+                    raise EigsError(
+                        self.path,
+                        f"{topic}: the bag lists {expected} messages but holds {k} (messages lost or added: damaged)",
+                    ) from None
                 return
             except EigsError:
                 raise
@@ -141,8 +151,37 @@ class _Bag:
             k += 1
 
 
+def check_sqlite_size(bag: Path, db: Path) -> None:
+    """Refuse a ROS 2 ``.db3`` shorter than its own header says (a cut copy): SQLite reads the missing pages as
+    zeros, so a cut database can otherwise decode to messages whose tail bytes are zeros.
+
+    SQLite file header (sqlite.org "Database File Format" §1.3): bytes 16–17 page size (big-endian; 1 means
+    65536), 24–27 file change counter, 28–31 database size in pages, valid when bytes 92–95 (version-valid-for)
+    equal the change counter."""
+    try:
+        with open(db, "rb") as fh:
+            head = fh.read(100)
+        size = db.stat().st_size
+    except OSError as err:
+        raise EigsError(bag, f"cannot read {db.name} ({err.strerror or err})") from None
+    if len(head) < 100 or not head.startswith(b"SQLite format 3\0"):
+        raise EigsError(bag, f"{db.name} is not an SQLite 3 database ({size} bytes, starts with {head[:16]!r})")
+    page = int.from_bytes(head[16:18], "big")
+    page = 65536 if page == 1 else page
+    pages = int.from_bytes(head[28:32], "big")
+    if head[24:28] == head[92:96] and pages and page >= 512 and size < pages * page:
+        raise EigsError(
+            bag, f"{db.name} is truncated: its header says {pages} pages of {page} bytes, the file ends at byte {size}"
+        )
+
+
 def _short(err: Exception) -> str:
-    text = " ".join(str(err).split()) or type(err).__name__
+    """One line (≤ 160 characters) describing an exception from rosbags or sqlite; Python's own error types (a
+    KeyError for an unknown type name, an AssertionError, a UnicodeDecodeError) are named, their text alone is
+    cryptic."""
+    text = " ".join(str(err).split())
+    if not text or type(err).__module__ == "builtins":
+        text = f"{type(err).__name__}: {text}" if text else type(err).__name__
     return text[:160]
 
 
