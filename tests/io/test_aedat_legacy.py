@@ -88,21 +88,43 @@ def test_aedat31_timestamp_overflow(tmp_path):
     np.testing.assert_array_equal(read_scene(out).events.t, ev[2])
 
 
-def write_aedat20(path, ev, h=180, chip="eu.seebetter.ini.chips.davis.DAVIS240C"):
-    """jAER DAVIS240 records: big-endian address + timestamp, y counted from the bottom; APS samples and a special
-    event mixed in."""
+def write_aedat20(path, ev, h=180, chip="eu.seebetter.ini.chips.davis.DAVIS240C", frames=(), w=240, seed=5):
+    """jAER DAVIS records (big-endian address + timestamp) following jAER's DavisChip layout: DVS columns mirrored
+    (x address = W − 1 − column), rows counted from the bottom; APS reset/signal reads of ``frames`` ((start, end,
+    (H, W) uint8 image): last reset read at ``start``, first signal read at ``end``, reset − signal = 4·image + 0..3);
+    mixed in: an IMU sample (7 records), a special event, a deprecated third-cycle read, signal reads left over from
+    a frame before the file and an unfinished frame (resets only) at the end."""
+    rng = np.random.default_rng(seed)
     x, y, t, p = ev
-    a = (((h - 1 - y).astype(np.uint32)) << 22) | (x.astype(np.uint32) << 12) | (p.astype(np.uint32) << 11)
-    rec = np.zeros(len(t), dtype=[("a", ">u4"), ("t", ">i4")])
-    rec["a"], rec["t"] = a, t
-    aps = np.zeros(5, dtype=rec.dtype)
-    aps["a"] = (1 << 31) | (3 << 22) | (7 << 12) | 512
-    aps["t"] = t[10]
-    special = np.zeros(1, dtype=rec.dtype)
-    special["a"], special["t"] = 1 << 10, t[20]
-    body = np.concatenate([rec[:11], aps, rec[11:21], special, rec[21:]]).astype(rec.dtype).tobytes()  # big-endian
+    dt = np.dtype([("a", ">u4"), ("t", ">i4")])
+    a = ((h - 1 - y).astype(np.uint32) << 22) | ((w - 1 - x).astype(np.uint32) << 12) | (p.astype(np.uint32) << 11)
+    parts = [(np.asarray(t, np.int64), a.astype(np.uint32))]
+    col, row = np.meshgrid(np.arange(w), np.arange(h))
+    order = np.argsort(-(row * w + col), axis=None)  # any order; this one runs from the top right pixel
+
+    def aps(cycle, values, t0, t1):
+        rr, cc = row.ravel()[order], col.ravel()[order]
+        addr = (1 << 31) | ((h - 1 - rr) << 22) | (cc << 12) | (cycle << 10) | values.ravel()[order]
+        return np.linspace(t0, t1, rr.size).astype(np.int64), addr.astype(np.uint32)
+
+    for s, e, img in frames:
+        cds = img.astype(np.int64) * 4 + rng.integers(0, 4, img.shape)
+        signal = rng.integers(0, 1024 - cds)
+        parts.append(aps(0, signal + cds, s - 3000, s))  # reset reads end at the exposure start
+        parts.append(aps(1, signal, e, e + 3000))  # signal reads start at the exposure end
+    parts.append((np.full(7, t[5]), np.full(7, 0x80000C00, np.uint32) | (np.arange(7, dtype=np.uint32) << 28)))
+    parts.append((np.array([t[20]]), np.array([1 << 10], np.uint32)))  # external input event
+    parts.append((np.array([t[30]]), np.array([(1 << 31) | (2 << 10) | (3 << 12) | 17], np.uint32)))  # "C" read
+    parts.append((np.full(4, t[0]), np.full(4, (1 << 31) | (1 << 10) | 5, np.uint32)))  # signals of an older frame
+    tail = aps(0, np.zeros((h, w), np.int64), t[-1], t[-1])
+    parts.append((tail[0][:100], tail[1][:100]))  # a frame cut by the end of the recording
+    tt = np.concatenate([q[0] for q in parts])
+    aa = np.concatenate([q[1] for q in parts])
+    k = np.argsort(tt, kind="stable")
+    rec = np.zeros(tt.size, dtype=dt)
+    rec["a"], rec["t"] = aa[k], tt[k]
     head = f"#!AER-DAT2.0\r\n# This is a raw AE data file\r\n# AEChip: {chip}\r\n".encode()
-    path.write_bytes(head + body)
+    path.write_bytes(head + rec.tobytes())
 
 
 def test_aedat20_round_trip(tmp_path, capsys):
@@ -111,7 +133,11 @@ def test_aedat20_round_trip(tmp_path, capsys):
     write_aedat20(f, ev)
     out = tmp_path / "s.h5"
     assert run_ingest("aedat", f, out, "--intrinsics", K_OPT) == 0
-    assert "5 APS/IMU samples, 1 special events not stored" in capsys.readouterr().out
+    text = capsys.readouterr().out
+    assert (
+        "4 APS reads outside a frame, 1 incomplete APS frames, 7 IMU samples, 1 third-cycle APS reads, "
+        "1 special events not stored"
+    ) in text
     s = read_scene(out)
     assert (s.camera.width, s.camera.height) == (240, 180)
     np.testing.assert_array_equal(s.events.x, ev[0])
@@ -121,10 +147,39 @@ def test_aedat20_round_trip(tmp_path, capsys):
 
 
 @pytest.mark.parametrize(
+    "chip,w,h",
+    [("eu.seebetter.ini.chips.davis.DAVIS240C", 240, 180), ("eu.seebetter.ini.chips.davis.Davis346B", 346, 260)],
+)
+def test_aedat20_aps_frames(tmp_path, chip, w, h):
+    """APS frames rebuilt from reset/signal reads (known images and exposure windows) on DAVIS240 and DAVIS346;
+    events in the same orientation as the frames (a DVS event and an APS read of one pixel carry mirrored x
+    addresses in jAER's layout)."""
+    ev = _events(3000, w, h, seed=4)
+    rng = np.random.default_rng(9)
+    starts = np.linspace(int(ev[2][0]) + 5000, int(ev[2][-1]) - 8000, 3).astype(np.int64)
+    frames = [
+        (int(s0), int(s0) + 2500 + 100 * i, rng.integers(0, 256, (h, w), dtype=np.uint8)) for i, s0 in enumerate(starts)
+    ]
+    frames[1][2][:, : w // 2] = 0  # left half dark: a mirrored frame would not match
+    f = tmp_path / "rec.aedat"
+    write_aedat20(f, ev, h=h, chip=chip, frames=frames, w=w)
+    out = tmp_path / "s.h5"
+    assert run_ingest("aedat", f, out, "--intrinsics", K_OPT, "--keep-events", "all") == 0
+    s = read_scene(out)
+    assert (s.camera.width, s.camera.height) == (w, h)
+    np.testing.assert_array_equal(s.frames.blurry[..., 0], np.stack([fr[2] for fr in frames]))
+    np.testing.assert_array_equal(s.frames.exposure_us, [[a, b] for a, b, _ in frames])
+    np.testing.assert_array_equal(s.events.x, ev[0])
+    np.testing.assert_array_equal(s.events.y, ev[1])
+    np.testing.assert_array_equal(s.events.t, ev[2])
+
+
+@pytest.mark.parametrize(
     "case,expected",
     [
         ("aedat4", "an AEDAT 4 file: use --format aedat4"),
-        ("chip", "eigs knows only the DAVIS240 address layout"),
+        ("chip", "eigs decodes the jAER DAVIS layout of DAVIS240 and DAVIS346 (monochrome) only"),
+        ("colour chip", "eigs decodes the jAER DAVIS layout of DAVIS240 and DAVIS346 (monochrome) only"),
         ("cut 2.0", "truncated: "),
         ("cut 3.1", "truncated: packet"),
         ("backwards", "timestamps go backwards at event"),
@@ -138,7 +193,9 @@ def test_errors(tmp_path, capsys, case, expected):
     if case == "aedat4":
         f.write_bytes(b"#!AER-DAT4.0\r\n")
     elif case == "chip":
-        write_aedat20(f, ev, chip="eu.seebetter.ini.chips.davis.DAVIS346B")
+        write_aedat20(f, ev, chip="ch.unizh.ini.jaer.chip.retina.DVS128")
+    elif case == "colour chip":
+        write_aedat20(f, ev, chip="eu.seebetter.ini.chips.davis.Davis346BColor")
     elif case == "cut 2.0":
         write_aedat20(f, ev)
         f.write_bytes(f.read_bytes()[:-3])

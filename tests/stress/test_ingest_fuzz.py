@@ -48,6 +48,9 @@ def recordings(tmp_path_factory) -> Originals:
     out["aedat31"] = ("a31.aedat", (root / "a31.aedat").read_bytes())
     write_aedat20(root / "a20.aedat", a)
     out["aedat20"] = ("a20.aedat", (root / "a20.aedat").read_bytes())
+    img = np.random.default_rng(2).integers(0, 256, (180, 240), dtype=np.uint8)
+    write_aedat20(root / "aps.aedat", a, frames=[(int(a[2][100]), int(a[2][150]), img)])
+    out["aedat20aps"] = ("aps.aedat", (root / "aps.aedat").read_bytes())
     x, y, t, p = _events()
     np.savez_compressed(root / "ev.npz", x=x, y=y, t=t, p=p)
     out["npz"] = ("ev.npz", (root / "ev.npz").read_bytes())
@@ -63,6 +66,7 @@ FORMATS = {
     "dat": ("prophesee", {}),
     "aedat31": ("aedat", {}),
     "aedat20": ("aedat", {}),
+    "aedat20aps": ("aedat", {}),
     "npz": ("numpy", {"time_unit": "us", "sensor_size": (W, H)}),
     "npy": ("numpy", {"time_unit": "us", "sensor_size": (W, H), "columns": "t,x,y,p"}),
 }
@@ -110,5 +114,6 @@ test_fuzz_evt3 = _fuzz("evt3")
 test_fuzz_dat = _fuzz("dat")
 test_fuzz_aedat31 = _fuzz("aedat31")
 test_fuzz_aedat20 = _fuzz("aedat20")
+test_fuzz_aedat20aps = _fuzz("aedat20aps")
 test_fuzz_npz = _fuzz("npz")
 test_fuzz_npy = _fuzz("npy")

@@ -13,11 +13,26 @@ eventNumber events of eventSize bytes. Timestamps are int32 µs; the full time i
   Region-of-interest frames (position ≠ 0 or size ≠ the sensor) are refused.
 - other types (special, IMU, …) and events whose valid bit is 0 are counted, not stored.
 
-**AEDAT 2.0** (jAER): ``#`` header lines (``#!AER-DAT2.0``, ``# AEChip: …``), then big-endian records of uint32
-address + int32 timestamp (µs). Address layout of the DAVIS240 chips: bit 31 = 1 for APS/IMU samples (counted, not
-stored: frames are not rebuilt from AEDAT 2.0 reset/signal reads), bit 10 = external/special event (counted);
-otherwise a DVS event with x = bits 21–12, y = bits 30–22, polarity = bit 11 (1 = ON). jAER puts the origin at the
-bottom left: row = H − 1 − y. Other chips (DAVIS346, DVS128, …) have other layouts and are refused.
+**AEDAT 2.0** (jAER) from DAVIS240 (240×180) and DAVIS346 (346×260) chips: ``#`` header lines (``#!AER-DAT2.0``,
+``# AEChip: …``), then big-endian records of uint32 address + int32 timestamp (µs). The address layout is jAER's
+``eu.seebetter.ini.chips.DavisChip`` constants, decoded by ``DavisBaseCamera.DavisEventExtractor`` for every DAVIS
+camera class of both sizes (``Davis346BaseCamera`` restates the same shifts and has no extractor of its own):
+y = bits 30–22, x = bits 21–12, bit 31 = 0 for DVS, 1 for APS/IMU.
+- DVS (bit 31 = 0): bit 10 set = external input (counted, not stored); else polarity = bit 11 (1 = ON). jAER
+  mirrors the DVS column (``e.x = sizeX − 1 − x``) and counts rows from the bottom: column = W − 1 − x,
+  row = H − 1 − y.
+- IMU (``address & 0x80000C00 == 0x80000C00``): counted, not stored.
+- APS (bit 31 = 1): bits 11–10 = readout cycle (0 reset read, 1 signal read; 2, the deprecated "C" read:
+  counted as a third-cycle read, ignored), bits 9–0 = 10-bit ADC sample. APS columns are not mirrored (jAER keeps
+  ``e.x = x``): column = x, row = H − 1 − y. A frame is a run of reset reads followed by a run of signal
+  reads, complete when every pixel has one of each (as jAER 3.0's ``DavisFrameAssembler``: completion by count,
+  not by the first/last pixel address, which differs between camera variants); pixel = reset − signal (correlated
+  double sampling, clamped at 0, 10 bits) → 8 bits as ``value >> 2``. Incomplete frames (cut at the file's start
+  or end, lost samples, rolling-shutter readout whose reset and signal reads interleave) are counted, not stored.
+- Exposure of an APS frame: jAER's global-shutter definition (``DavisBaseCamera``: start of exposure at the
+  **last reset read**, end at the **first signal read**): ``[t(last reset read), t(first signal read))``; a frame
+  whose window is empty is counted and not stored.
+Colour DAVIS chips (``…Color`` classes: a colour-filter extractor), DAVIS640/208/128 and DVS128 are refused.
 
 Timestamps are kept as recorded (µs from the camera's reset); going backwards is an error naming the event.
 Sensor size: from the chip named in the header (DAVIS240: 240×180; DAVIS346: 346×260; DVS128: 128×128), the
@@ -46,6 +61,9 @@ log = logging.getLogger(__name__)
 CHUNK_EVENTS = 1 << 22
 PACKET_HEADER = struct.Struct("<hhiiiiii")
 CHIP_SIZES = {"DAVIS240": (240, 180), "DAVIS346": (346, 260), "DVS128": (128, 128), "DAVIS640": (640, 480)}
+DAVIS20_CHIPS = ("DAVIS240", "DAVIS346")  # chips whose AEDAT 2.0 layout eigs decodes (jAER DavisChip)
+APS_BIT = np.uint32(1 << 31)
+IMU_CODE = np.uint32(0x80000C00)
 MAX_HEADER = 1 << 20
 
 
@@ -54,6 +72,7 @@ class Header:
     version: str  # "2.0" or "3.1"
     data_start: int
     chip: str | None
+    chip_line: str = ""  # the header line naming the chip (e.g. "AEChip: eu.seebetter.ini.chips.davis.DAVIS240C")
     width: int | None = None
     height: int | None = None
     lines: list[str] = field(default_factory=list)
@@ -87,13 +106,13 @@ def read_header(path: Path) -> Header:
                 break
             if pos > MAX_HEADER:
                 raise EigsError(path, "header longer than 1 MiB")
-    chip = None
+    chip, chip_line = None, ""
     for ln in lines:
         mm = re.search(r"(DAVIS\d+|DVS128)", ln, re.IGNORECASE)
         if mm and ("chip" in ln.lower() or "source" in ln.lower()):
-            chip = mm.group(1).upper()
+            chip, chip_line = mm.group(1).upper(), ln
             break
-    h = Header(version, pos, chip, lines=lines)
+    h = Header(version, pos, chip, chip_line, lines=lines)
     if chip is not None:
         for key, (w, hh) in CHIP_SIZES.items():
             if chip.startswith(key):
@@ -213,7 +232,10 @@ def _events20(path: Path, h: Header, width: int, height: int, counts: dict[str, 
             a = rec["a"]
             aps = (a >> 31).astype(bool)
             special = ~aps & ((a >> 10) & 1).astype(bool)
-            counts["APS/IMU samples"] = counts.get("APS/IMU samples", 0) + int(np.count_nonzero(aps))
+            imu = (a & IMU_CODE) == IMU_CODE
+            counts["IMU samples"] = counts.get("IMU samples", 0) + int(np.count_nonzero(imu))
+            third = aps & ~imu & (((a >> 10) & 3) == 2)
+            counts["third-cycle APS reads"] = counts.get("third-cycle APS reads", 0) + int(np.count_nonzero(third))
             counts["special events"] = counts.get("special events", 0) + int(np.count_nonzero(special))
             dvs = ~aps & ~special
             a, t32 = a[dvs], rec["t"][dvs]
@@ -223,11 +245,147 @@ def _events20(path: Path, h: Header, width: int, height: int, counts: dict[str, 
             order(t, offset)
             xr = ((a >> 12) & 0x3FF).astype(np.int64)
             yr = ((a >> 22) & 0x1FF).astype(np.int64)
-            x = to_pixel(xr, width, "x", where, offset)
-            y = to_pixel(height - 1 - yr, height, "y (flipped from jAER's bottom-left origin)", where, offset)
+            x = (width - 1) - to_pixel(xr, width, "x address", where, offset).astype(np.int64)
+            y = (height - 1) - to_pixel(yr, height, "y address", where, offset).astype(np.int64)
+            x, y = x.astype(np.uint16), y.astype(np.uint16)
             p = np.where((a >> 11) & 1, np.int8(1), np.int8(-1))
             offset += t.size
             yield x, y, t, p
+
+
+@dataclass
+class _ApsFrame:
+    """A complete AEDAT 2.0 APS frame: the records [first, stop) hold its reset and signal reads."""
+
+    first: int  # record index of its first reset read
+    stop: int  # record index past its last signal read
+    exposure: tuple[int, int]  # [last reset read, first signal read) µs
+
+
+@dataclass
+class _ApsState:
+    """The frame being assembled while scanning (reset phase, then signal phase)."""
+
+    n: int  # pixels per frame
+    phase: int = -1  # -1 none, 0 reset reads, 1 signal reads
+    first: int = 0
+    reset_seen: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
+    signal_seen: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
+    bad: bool = False
+    last_reset_t: int = 0
+    first_signal_t: int = 0
+    signals: int = 0
+
+    def start(self, first: int) -> None:
+        self.phase, self.first, self.bad, self.signals = 0, first, False, 0
+        self.reset_seen = np.zeros(self.n, np.int32)
+        self.signal_seen = np.zeros(self.n, np.int32)
+
+
+def _aps_fields(rec: np.ndarray, width: int, height: int) -> tuple[np.ndarray, ...]:
+    """APS reset/signal reads among AEDAT 2.0 records → (positions in ``rec``, cycle 0/1, pixel index
+    row * W + column with -1 outside the sensor, 10-bit sample, timestamp); the other APS cycles are dropped."""
+    a = rec["a"]
+    aps = ((a & APS_BIT) != 0) & ((a & IMU_CODE) != IMU_CODE)
+    cyc = (a >> 10) & 3
+    pos = np.flatnonzero(aps & (cyc <= 1))
+    a = a[pos]
+    xr = ((a >> 12) & 0x3FF).astype(np.int64)
+    yr = ((a >> 22) & 0x1FF).astype(np.int64)
+    inside = (xr < width) & (yr < height)
+    idx = np.where(inside, (height - 1 - yr) * width + xr, -1)
+    return pos, cyc[pos].astype(np.int8), idx, (a & 0x3FF).astype(np.int32), rec["t"][pos].astype(np.int64)
+
+
+def _scan_aps20(path: Path, h: Header, width: int, height: int, counts: dict[str, int], chunk: int = CHUNK_EVENTS):
+    """First pass over an AEDAT 2.0 file: the complete APS frames (record ranges and exposure windows).
+
+    Reads ``chunk`` records at a time; the reset/signal runs are applied to per-pixel counters with NumPy, so a frame
+    is complete when each of its W·H pixels has exactly one reset and one signal read."""
+    size = path.stat().st_size - h.data_start
+    if size % 8:
+        raise EigsError(path, f"truncated: {size} bytes of records is not a multiple of 8 (cut file)")
+    frames: list[_ApsFrame] = []
+    st = _ApsState(width * height)
+    base = 0
+
+    def close(stop: int) -> None:
+        ok = (
+            not st.bad
+            and st.signals == st.n
+            and bool(np.all(st.reset_seen == 1))
+            and bool(np.all(st.signal_seen == 1))
+            and st.first_signal_t > st.last_reset_t
+        )
+        if ok:
+            frames.append(_ApsFrame(st.first, stop, (st.last_reset_t, st.first_signal_t)))
+        else:
+            counts["incomplete APS frames"] = counts.get("incomplete APS frames", 0) + 1
+        st.phase = -1
+
+    with open(path, "rb") as fh:
+        fh.seek(h.data_start)
+        while True:
+            buf = fh.read(8 * chunk)
+            if not buf:
+                break
+            rec = np.frombuffer(buf, dtype=[("a", ">u4"), ("t", ">i4")])
+            pos, cyc, idx, _, t = _aps_fields(rec, width, height)
+            if pos.size == 0:
+                base += rec.size
+                continue
+            if np.any(t < 0):
+                k = base + int(pos[np.flatnonzero(t < 0)[0]])
+                raise EigsError(path, f"negative timestamp in the APS sample at record {k}: corrupted file")
+            cuts = np.flatnonzero(np.diff(cyc)) + 1
+            for lo, hi in zip(np.r_[0, cuts], np.r_[cuts, pos.size], strict=True):
+                c, run = int(cyc[lo]), idx[lo:hi]
+                if c == 0:
+                    if st.phase == 1:
+                        close(base + int(pos[lo]))
+                    if st.phase == -1:
+                        st.start(base + int(pos[lo]))
+                    seen = st.reset_seen
+                    st.last_reset_t = int(t[hi - 1])
+                else:
+                    if st.phase == -1:  # signal reads of a frame whose resets precede the file (or were lost)
+                        counts["APS reads outside a frame"] = counts.get("APS reads outside a frame", 0) + hi - lo
+                        continue
+                    if st.phase == 0:
+                        st.phase, st.first_signal_t = 1, int(t[lo])
+                    seen = st.signal_seen
+                    st.signals += hi - lo
+                st.bad |= bool(np.any(run < 0))
+                ok = run[run >= 0]
+                seen += np.bincount(ok, minlength=st.n).astype(np.int32)
+                if c == 1 and st.signals >= st.n:
+                    close(base + int(pos[hi - 1]) + 1)
+            base += rec.size
+    if st.phase != -1:
+        counts["incomplete APS frames"] = counts.get("incomplete APS frames", 0) + 1
+    return frames
+
+
+def _load_aps20(path: Path, h: Header, frames: list[_ApsFrame], idx: np.ndarray, width: int, height: int):
+    """(M, H, W, 1) uint8 frames ``idx``: reset − signal per pixel (clamped at 0, 10 bits) >> 2."""
+    out = np.empty((len(idx), height, width, 1), np.uint8)
+    n = width * height
+    with open(path, "rb") as fh:
+        for j, i in enumerate(idx):
+            f = frames[int(i)]
+            fh.seek(h.data_start + 8 * f.first)
+            rec = np.frombuffer(fh.read(8 * (f.stop - f.first)), dtype=[("a", ">u4"), ("t", ">i4")])
+            _, cyc, pix, val, _ = _aps_fields(rec, width, height)
+            reset = np.zeros(n, np.int32)
+            signal = np.zeros(n, np.int32)
+            r, sg = cyc == 0, cyc == 1
+            if np.count_nonzero(r) != n or np.count_nonzero(sg) != n or np.any(pix < 0):
+                raise EigsError(path, f"APS frame {int(i)} changed between reads (the file changed while reading)")
+            reset[pix[r]] = val[r]
+            signal[pix[sg]] = val[sg]
+            cds = np.clip(reset - signal, 0, 1023)
+            out[j, ..., 0] = (cds >> 2).astype(np.uint8).reshape(height, width)
+    return out
 
 
 def open_aedat_legacy_source(source: str, opts: IngestOptions) -> RawSource:
@@ -243,16 +401,32 @@ def open_aedat_legacy_source(source: str, opts: IngestOptions) -> RawSource:
     if opts.groundtruth is not None:
         src.trajectory = read_groundtruth(Path(opts.groundtruth))
     if h.version == "2.0":
-        if h.chip is None or not h.chip.startswith("DAVIS240"):
+        if h.chip is None or not h.chip.startswith(DAVIS20_CHIPS) or "color" in h.chip_line.lower():
             raise EigsError(
-                path, f"AEDAT 2.0 from chip {h.chip or 'unknown'}: eigs knows only the DAVIS240 address layout"
+                path,
+                f"AEDAT 2.0 from chip {h.chip_line or 'unknown'}: eigs decodes the jAER DAVIS layout of DAVIS240 and "
+                "DAVIS346 (monochrome) only",
             )
-        src.notes.append(f"AEDAT 2.0, chip {h.chip}; APS frames are not rebuilt from AEDAT 2.0 samples")
+        assert h.width is not None and h.height is not None
+        w20, h20 = h.width, h.height
+        counts: dict[str, int] = {}
+        aps = _scan_aps20(path, h, w20, h20, counts)
+        src.notes.append(
+            f"AEDAT 2.0, chip {h.chip_line.split(':')[-1].strip()}; {len(aps)} APS frames (reset − signal, exposure "
+            "from the last reset read to the first signal read)"
+        )
+        if aps:
+            exp = np.asarray([f.exposure for f in aps], dtype=np.int64)
+            back = np.flatnonzero(np.diff(exp[:, 0]) < 0)
+            if back.size:
+                raise EigsError(path, f"APS frame exposures go backwards at frame {int(back[0]) + 1}")
+            src.n_frames = len(aps)
+            src.exposure_us = exp
+            src.load_frames = lambda idx: _load_aps20(path, h, aps, idx, w20, h20)
 
         def events20(w: int, hh: int) -> Iterator[EventChunk]:
-            counts: dict[str, int] = {}
             yield from _events20(path, h, w, hh, counts)
-            src.notes.append(", ".join(f"{n} {k}" for k, n in counts.items()) + " not stored")
+            src.notes.append(", ".join(f"{n} {k}" for k, n in counts.items() if n) + " not stored")
 
         src.events = events20
         return src
