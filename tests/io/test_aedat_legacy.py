@@ -115,8 +115,9 @@ def write_aedat20(path, ev, h=180, chip="eu.seebetter.ini.chips.davis.DAVIS240C"
     parts.append((np.full(7, t[5]), np.full(7, 0x80000C00, np.uint32) | (np.arange(7, dtype=np.uint32) << 28)))
     parts.append((np.array([t[20]]), np.array([1 << 10], np.uint32)))  # external input event
     parts.append((np.array([t[30]]), np.array([(1 << 31) | (2 << 10) | (3 << 12) | 17], np.uint32)))  # "C" read
-    parts.append((np.full(4, t[0]), np.full(4, (1 << 31) | (1 << 10) | 5, np.uint32)))  # signals of an older frame
-    tail = aps(0, np.zeros((h, w), np.int64), t[-1], t[-1])
+    first, last = min(int(q[0].min()) for q in parts), max(int(q[0].max()) for q in parts)
+    parts.append((np.full(4, first - 1), np.full(4, (1 << 31) | (1 << 10) | 5, np.uint32)))  # an older frame's
+    tail = aps(0, np.zeros((h, w), np.int64), last + 1, last + 1)
     parts.append((tail[0][:100], tail[1][:100]))  # a frame cut by the end of the recording
     tt = np.concatenate([q[0] for q in parts])
     aa = np.concatenate([q[1] for q in parts])

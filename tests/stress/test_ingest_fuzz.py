@@ -49,7 +49,7 @@ def recordings(tmp_path_factory) -> Originals:
     write_aedat20(root / "a20.aedat", a)
     out["aedat20"] = ("a20.aedat", (root / "a20.aedat").read_bytes())
     img = np.random.default_rng(2).integers(0, 256, (180, 240), dtype=np.uint8)
-    write_aedat20(root / "aps.aedat", a, frames=[(int(a[2][100]), int(a[2][150]), img)])
+    write_aedat20(root / "aps.aedat", a, frames=[(int(a[2][200]), int(a[2][250]), img)])
     out["aedat20aps"] = ("aps.aedat", (root / "aps.aedat").read_bytes())
     x, y, t, p = _events()
     np.savez_compressed(root / "ev.npz", x=x, y=y, t=t, p=p)
