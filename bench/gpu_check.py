@@ -394,12 +394,27 @@ def environment() -> dict[str, Any]:
     except ImportError:
         env["torch"] = None
     try:
+        import eigs
+
+        env["eigs_code"] = code_digest(Path(eigs.__file__).parent)
+    except ImportError:
+        env["eigs_code"] = None
+    try:
         import gsplat
 
         env["gsplat"] = getattr(gsplat, "__version__", None)
     except ImportError:
         env["gsplat"] = None
     return env
+
+
+def code_digest(package: Path) -> str:
+    """sha256 (first 16 hex digits) over the relative paths and contents of a package's .py, .cpp and .h files: two
+    reports with the same digest ran the same eigs code (a checkout's git state does not travel to a GPU machine)."""
+    h = hashlib.sha256()
+    for path in sorted(p for p in package.rglob("*") if p.suffix in (".py", ".cpp", ".h") and p.is_file()):
+        h.update(path.relative_to(package).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
+    return h.hexdigest()[:16]
 
 
 def cpu_name() -> str | None:
@@ -469,8 +484,10 @@ def build_report(
         "run_wall_s": {run: _sum_or_none(r.get("train_wall_s"), r.get("evaluate_wall_s")) for run, r in runs.items()},
     }
     if baseline is not None:
-        doc["baseline"] = {"device": baseline.get("device"), "processor": baseline.get("environment", {}).get(
-            "processor"), "comparison": compare(runs, baseline.get("runs", {}))}  # fmt: skip
+        b_env = baseline.get("environment", {})
+        same = None if env.get("eigs_code") is None else env.get("eigs_code") == b_env.get("eigs_code")
+        doc["baseline"] = {"device": baseline.get("device"), "processor": b_env.get("processor"),
+                           "same_eigs_code": same, "comparison": compare(runs, baseline.get("runs", {}))}  # fmt: skip
     return doc
 
 

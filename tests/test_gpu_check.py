@@ -205,9 +205,10 @@ def test_report_and_comparison_with_a_baseline():
     baseline = {"device": "cpu", "environment": {"processor": "Xeon"}, "runs": {
         "eigs+": {"novel_psnr": 30.88, "blur_psnr": 32.5, "seconds_per_step": 0.15},
         "edi-3dgs": {"novel_psnr": 30.36, "seconds_per_step": 0.03}}}  # fmt: skip
-    doc = gpu_check.build_report({"gpu": "NVIDIA H100"}, {"passed": True, "cases": {"t": "passed"}}, runs,
-                                 gsplat_build_s=120.5, tests_rc=0, baseline=baseline,
-                                 deviations=("a", "b"))  # fmt: skip
+    baseline["environment"]["eigs_code"] = "abc"
+    env = {"gpu": "NVIDIA H100", "eigs_code": "abd"}
+    doc = gpu_check.build_report(env, {"passed": True, "cases": {"t": "passed"}}, runs, gsplat_build_s=120.5,
+                                 tests_rc=0, baseline=baseline, deviations=("a", "b"))  # fmt: skip
     assert doc["format"] == "eigs-gpu-check" and doc["environment"]["gpu"] == "NVIDIA H100"
     assert doc["conformance"] == {"passed": True, "cases": {"t": "passed"}, "pytest_rc": 0}
     assert doc["gsplat_build_s"] == 120.5 and doc["gsplat_deviations"] == ["a", "b"]
@@ -215,6 +216,7 @@ def test_report_and_comparison_with_a_baseline():
     assert doc["run_wall_s"] == {"eigs+": 110.5, "edi-3dgs": 45.0, "broken": None}
     assert doc["runs"]["eigs+"]["cpu_seconds_per_step"] == pytest.approx(0.1)
     assert "cpu_seconds_per_step" not in doc["runs"]["edi-3dgs"] and doc["note"] is None
+    assert doc["baseline"]["same_eigs_code"] is False and doc["baseline"]["processor"] == "Xeon"
     cmp = doc["baseline"]["comparison"]
     assert set(cmp) == {"eigs+", "edi-3dgs"}
     assert cmp["eigs+"]["novel_psnr_delta_db"] == pytest.approx(-0.18)
@@ -224,6 +226,19 @@ def test_report_and_comparison_with_a_baseline():
     json.dumps(doc)  # JSON-serialisable
     empty = gpu_check.build_report({}, {"passed": False, "cases": {}}, None)
     assert empty["runs"] == {} and empty["psnr"] == {} and "baseline" not in empty
+
+
+def test_code_digest_follows_the_sources(tmp_path):
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "a.py").write_text("x = 1\n")
+    (tmp_path / "sub" / "k.cpp").write_text("int k;\n")
+    (tmp_path / "notes.txt").write_text("ignored")
+    want = hashlib.sha256(b"a.py\0x = 1\n\0" + b"sub/k.cpp\0int k;\n\0").hexdigest()[:16]
+    assert gpu_check.code_digest(tmp_path) == want
+    (tmp_path / "notes.txt").write_text("still ignored")
+    assert gpu_check.code_digest(tmp_path) == want
+    (tmp_path / "sub" / "k.cpp").write_text("int k = 2;\n")
+    assert gpu_check.code_digest(tmp_path) != want
 
 
 def test_merge_runs_of_parallel_cpu_jobs(tmp_path):
