@@ -66,7 +66,7 @@ export PYTHONPATH="$SITE:$REPO/src:$REPO${PYTHONPATH:+:$PYTHONPATH}"
 export EIGS_CACHE_DIR="$WORK/cache" TORCH_EXTENSIONS_DIR="$WORK/torch_extensions"
 export TORCH_CUDA_ARCH_LIST=${TORCH_CUDA_ARCH_LIST:-9.0} MAX_JOBS=${MAX_JOBS:-16}
 if [ -z "${CUDA_HOME:-}" ]; then
-    # torch guesses the toolkit's root from nvcc's folder, which fails for a wrapper (docs/platform.md §5)
+    # torch guesses the toolkit root from nvcc's folder, which a wrapper script misleads (no -lcudart at link time)
     for c in /usr/local/cuda "$(dirname "$(dirname "$(readlink -f "$(command -v nvcc || echo /nonexistent/bin/nvcc)")")")"; do
         if [ -x "$c/bin/nvcc" ]; then export CUDA_HOME="$c"; break; fi
     done
