@@ -100,11 +100,13 @@ def test_viewer_in_chromium_matches_eigs_render_and_fails_on_a_wrong_pose(tmp_pa
         sync_playwright = None
     require(sync_playwright is not None, "the playwright package is not installed (pip install -e '.[dev]')")
     assert sync_playwright is not None
+    t0 = time.monotonic()
     case = make_view_case(tmp_path / "case")
     ref = render_reference(case["3dgs"], case, tmp_path / "render_3dgs")
     ref_other = render_reference(case["eigs"], case, tmp_path / "render_eigs")
     assert len(ref) == 3 and ref[0].shape == (240, 320, 3)
 
+    t_render = time.monotonic() - t0
     outside: list[str] = []
     viewer = ViewerProcess(str(case["3dgs"]), "--camera", "test:0")
     url = viewer.url
@@ -126,15 +128,24 @@ def test_viewer_in_chromium_matches_eigs_render_and_fails_on_a_wrong_pose(tmp_pa
                 page.route("**/*", only_local)
                 page.goto(url + "?fixedDpr=1")  # fixedDpr: no resolution drops when software WebGL is slow
                 page.get_by_text("Show cameras", exact=True).click()  # frustums off: the bare scene
+                t_page = time.monotonic()
                 at_test0 = settled_view(page)
                 choose(page, "Camera", "test 1")  # the same camera turned by 30° (yaw)
                 at_test1 = settled_view(page, previous=at_test0)
                 choose(page, "Camera", "test 2")  # rolled by 30°
                 at_test2 = settled_view(page, previous=at_test1)
+                page.mouse.move(320, 240)  # orbit away with the mouse, then pick the same camera again
+                page.mouse.down()
+                page.mouse.move(420, 300, steps=8)
+                page.mouse.up()
+                orbited = settled_view(page, previous=at_test2)
+                choose(page, "Camera", "test 2")
+                again_at_test2 = settled_view(page, previous=orbited)
                 choose(page, "Camera", "test 0")
-                back_at_test0 = settled_view(page, previous=at_test2)
+                back_at_test0 = settled_view(page, previous=again_at_test2)
                 choose(page, "Run", "b4/eigs")  # the other run, same camera
                 other_run = settled_view(page, previous=back_at_test0)
+                t_page = time.monotonic() - t_page
                 Image.fromarray(at_test0).save(tmp_path / "viewer_test0.png")
             finally:
                 browser.close()
@@ -147,19 +158,21 @@ def test_viewer_in_chromium_matches_eigs_render_and_fails_on_a_wrong_pose(tmp_pa
         "test 0": similarity(at_test0, ref[0]),
         "test 1 (menu)": similarity(at_test1, ref[1]),
         "test 2 (menu)": similarity(at_test2, ref[2]),
+        "test 2 again, after orbiting": similarity(again_at_test2, ref[2]),
         "test 0 again": similarity(back_at_test0, ref[0]),
         "other run at test 0": similarity(other_run, ref_other[0]),
         f"wrong pose: yawed {WRONG_DEG:.0f}°": similarity(at_test1, ref[0]),
         f"wrong pose: rolled {WRONG_DEG:.0f}°": similarity(at_test2, ref[0]),
         "wrong run": similarity(other_run, ref[0]),
+        "orbited by mouse": similarity(orbited, ref[2]),
         "black page": similarity(np.zeros_like(ref[0]), ref[0]),
         "white page": similarity(np.full_like(ref[0], 255), ref[0]),
     }
     report = "; ".join(f"{k}: SSIM {s:.3f}, PSNR {p:.1f} dB" for k, (s, p) in scores.items())
-    print(report)
-    for key in ("test 0", "test 1 (menu)", "test 2 (menu)", "test 0 again", "other run at test 0"):
+    print(f"{report}\n(eigs render: {t_render:.1f} s; the browser from the first screenshot on: {t_page:.1f} s)")
+    for key in list(scores)[:6]:
         s, p = scores[key]
         assert s >= SSIM_MIN and p >= PSNR_MIN, f"{key} should match eigs render: {report}"
-    for key in list(scores)[5:]:
+    for key in list(scores)[6:]:
         s, p = scores[key]
         assert not (s >= SSIM_MIN and p >= PSNR_MIN), f"{key} should not match: {report}"

@@ -174,15 +174,13 @@ class Viewer:
         return cb
 
     def _on_camera_menu(self, event: Any) -> None:
+        """Move the browser that picked a camera there, then set the menu back to (free), so picking the same
+        camera again after orbiting away works."""
         cam = self.content.cameras.get(self.camera_menu.value)
-        if cam is not None and event.client is not None:
-            _set_client_camera(event.client, cam)
-
-    def goto(self, name: str) -> None:
-        """Move every connected browser to the camera called ``name`` (``test 0``, ``train 3``, …)."""
-        cam = self.content.cameras[name]
-        for client in self.server.get_clients().values():
-            _set_client_camera(client, cam)
+        if cam is None or event.client is None:
+            return
+        _set_client_camera(event.client, cam)
+        self.camera_menu.value = FREE
 
     def stop(self) -> None:
         with self._lock:
