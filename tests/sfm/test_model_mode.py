@@ -34,7 +34,12 @@ def _c2w_truth(rng: np.random.Generator) -> np.ndarray:
 
 @pytest.fixture
 def setup(tmp_path):
-    """scene.h5 with frame names, b2/edi.h5, and the COLMAP model (binary in model/, text in model_txt/)."""
+    return build_case(tmp_path)
+
+
+def build_case(tmp_path: Path) -> dict:
+    """scene.h5 with frame names, edi.h5, and the COLMAP model (binary in model/, text in model_txt/) under
+    ``tmp_path``; returns the directory, the true poses, latent times, exposure starts and the model's points."""
     import pycolmap
 
     rng = np.random.default_rng(4)

@@ -71,6 +71,7 @@ def read_model(path: str | Path):
     p = Path(path)
     if not p.is_dir():
         raise EigsError(p, "no such COLMAP model directory")
+    _probe(p)
     try:
         rec = pycolmap.Reconstruction(str(p))
     except Exception as err:  # pycolmap raises ValueError, IndexError, RuntimeError on bad files
@@ -79,6 +80,38 @@ def read_model(path: str | Path):
     if not any(im.has_pose for im in rec.images.values()):
         raise EigsError(p, "the COLMAP model has no registered image")
     return rec
+
+
+_PROBE = "import sys, pycolmap; pycolmap.Reconstruction(sys.argv[1])"
+PROBE_MEMORY_BYTES = 4 << 30  # address space of the probing child, plus 64 × the model's size
+
+
+def _probe(p: Path) -> None:
+    """Read the model once in a child process: COLMAP's reader aborts the whole process on some damaged files (a
+    truncated points3D.bin fails a glog CHECK), which must become a one-line error, not a crash of the stage."""
+    import subprocess
+    import sys
+
+    size = sum(f.stat().st_size for f in p.iterdir() if f.is_file())
+    limit = PROBE_MEMORY_BYTES + 64 * size  # a damaged count makes the reader allocate absurd amounts: fail fast
+
+    def cap() -> None:
+        import resource
+
+        resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+
+    proc = subprocess.run([sys.executable, "-c", _PROBE, str(p)], capture_output=True, text=True, check=False,
+                          preexec_fn=cap)  # fmt: skip
+    if proc.returncode == 0:
+        return
+    lines = [ln.strip() for ln in proc.stderr.splitlines() if ln.strip()]
+    errors = [ln for ln in lines if ln.split(":", 1)[0].endswith(("Error", "Exception"))]
+    if errors:
+        why = errors[-1].split(":", 1)[1].strip() or errors[-1].split(":", 1)[0]
+        raise EigsError(p, f"unreadable COLMAP model (truncated or corrupt?): {why}")
+    checks = [ln for ln in lines if "Check failed" in ln]
+    what = checks[0].split("]", 1)[-1].strip() if checks else f"exit status {proc.returncode}"
+    raise EigsError(p, f"unreadable COLMAP model (truncated or corrupt?): COLMAP's reader aborted ({what})")
 
 
 def _key(name: str, level: int) -> str:
