@@ -249,3 +249,17 @@ def test_methods_without_motion_export_none(data):
     tr = _method(data, "edi-3dgs")
     p = tr.model.params
     assert tr.method.latent_motion(p["means"], p["quats"]) is None
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA GPU (bench/gpu_check.sh runs it)")
+def test_eigs_plus_steps_on_cuda(data):
+    """Every tensor of an eigs+ step lives on the model's device (the blur weights and the latent mask were made on
+    the CPU once: the first CUDA run of eigs+ stopped at its first step)."""
+    opts = {"pose_prior": True, "ade_zero_last": True, "blur_target": "discrete", "blur_weights": "trapezoid",
+            "latent_weight": 0.5}  # fmt: skip
+    cfg = TrainConfig.from_dict({"method": "eigs", "densify": False, "method_options": opts})
+    tr = Trainer(data, cfg, torch.device("cuda"))
+    moving = [i for i, v in enumerate(tr.method.views) if not bool(tr.method.events.sharp[int(v)])]
+    out = tr.method.step(tr.model, moving[0], 0, 0)
+    out.loss.backward()
+    assert torch.isfinite(out.loss) and out.loss.device.type == "cuda"

@@ -290,7 +290,7 @@ class MultiRender(Method):
             return self.sharp_step(model, v, sh_degree)
         images, infos, dx, latent_pos = self.renders(model, v, sh_degree)
         stack = torch.stack(images)  # (R, H, W, C) in time order
-        w = self.blur_weights(len(images)).to(stack.dtype).reshape(-1, 1, 1, 1)
+        w = self.blur_weights(len(images)).to(stack).reshape(-1, 1, 1, 1)
         blur = from_linear((to_linear(stack, self.response) * w).sum(dim=0), self.response)
         stack = stack[latent_pos]  # the N+1 latent renders for the event losses
         loss, l1, dssim = photometric_loss(blur, self.blurry[v], self.cfg.lambda_dssim)
@@ -313,7 +313,7 @@ class MultiRender(Method):
             loss = loss + float(o["lambda_event"]) * ev
             terms["event"] = ev.item()
         if self.latent is not None:
-            ok = self.valid[v]  # a latent frame without a pose has no render of its own time
+            ok = self.valid[v].to(stack.device)  # a latent frame without a pose has no render of its own time
             lat = (stack[ok] - self.latent[v][ok]).abs().mean()
             loss = loss + float(o["latent_weight"]) * lat
             terms["latent"] = lat.item()
