@@ -145,7 +145,9 @@ def run_batch(bundle: Path, resources: Path, work: Path, workers: int, start_unt
         log = open(work / "logs" / f"{name}_{('train', 'evaluate')[stage]}.log", "w")  # noqa: SIM115
         p = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env, start_new_session=True)
         log.close()
-        running[p.pid] = {**job, "stage": stage, "t": time.monotonic(), "name": name}
+        # the Popen object is kept: one that is garbage-collected while running goes to subprocess's own reaper,
+        # which would take its exit status (and its resource usage) before os.wait4 sees it
+        running[p.pid] = {**job, "stage": stage, "t": time.monotonic(), "name": name, "proc": p}
 
     while pending or running:
         now = time.monotonic() - t0
@@ -166,6 +168,7 @@ def run_batch(bundle: Path, resources: Path, work: Path, workers: int, start_unt
             time.sleep(0.5)
             continue
         st = running.pop(pid)
+        st["proc"].returncode = os.waitstatus_to_exitcode(status)  # reaped here, not by Popen
         wall = time.monotonic() - st["t"]
         stage = ("train", "evaluate")[st["stage"]]
         bench = work / "benchmarks" / stage / f"{st['name']}.tsv"
