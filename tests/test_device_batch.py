@@ -46,7 +46,7 @@ def test_scheduler_runs_both_stages_records_failures_and_stops_at_the_deadline(t
     def commands(_bundle, _res, work, job):
         out = work / "results" / job["scene"] / "b4" / job["run"]
         if job["run"] == "fails":
-            return [_script("raise SystemExit(3)"), _script("")]
+            return [_script("import time; time.sleep(0.3); raise SystemExit(3)"), _script("")]
         if job["run"] == "slow":
             return [_script("import time; time.sleep(60)"), _script("")]
         write = f"import pathlib; p = pathlib.Path({str(out)!r}); p.mkdir(parents=True, exist_ok=True); "
@@ -54,7 +54,7 @@ def test_scheduler_runs_both_stages_records_failures_and_stops_at_the_deadline(t
                 _script(write + "(p / 'stage2').write_text('done')")]  # fmt: skip
 
     monkeypatch.setattr(db, "job_commands", commands)
-    rep = db.run_batch(bundle, tmp_path, tmp_path / "work", workers=3, start_until=0.05, deadline=6.0)
+    rep = db.run_batch(bundle, tmp_path, tmp_path / "work", workers=3, start_until=0.1, deadline=6.0)
     status = {j["run"]: j["status"] for j in rep["jobs"]}
     assert status == {"ok": "ok", "fails": "train failed", "slow": "stopped at the deadline (train)",
                       "late": "not started"}  # fmt: skip
