@@ -54,6 +54,20 @@ def _compiler_error(text: str) -> str:
     return "; ".join(lines[:5])
 
 
+def ninja_on_path() -> None:
+    """Put the interpreter's own scripts folder on PATH when no ``ninja`` is found there: PyTorch's extension loader
+    looks for the ``ninja`` executable on PATH only, and the PyPI package ``ninja`` (a dependency) installs it beside
+    the interpreter, which is not on PATH when ``.venv/bin/eigs`` or ``.venv/bin/pytest`` runs unactivated."""
+    import os
+    import shutil
+    import sys
+
+    if shutil.which("ninja") is None:
+        scripts = os.path.dirname(sys.executable)
+        if os.path.isfile(os.path.join(scripts, "ninja")):
+            os.environ["PATH"] = scripts + os.pathsep + os.environ.get("PATH", "")
+
+
 def load() -> ModuleType:
     """The compiled extension module (builds it on first use)."""
     global _module
@@ -64,6 +78,7 @@ def load() -> ModuleType:
             return _module
         from torch.utils import cpp_extension
 
+        ninja_on_path()
         name = f"eigs_render_{source_hash()}"
         build = cache_dir() / "torch_extensions" / name
         try:
