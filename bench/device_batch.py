@@ -35,24 +35,15 @@ import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench.gpu_check import CheckError, copy_h5, sha256, train_config_json  # noqa: E402
+from bench.schedule import merge_configs  # noqa: E402
 
 FORMAT = "eigs-device-batch"
 BENCH_HEADER = "s\th:m:s\tmax_rss\tmax_vms\tmax_uss\tmax_pss\tio_in\tio_out\tmean_load\tcpu_time\n"
 
 
 def merged_config(paths: list[Path]) -> dict:
-    """The config files merged as Snakemake merges --configfile arguments (later files update earlier ones,
-    dictionaries key by key)."""
-
-    def update(a: dict, b: dict) -> dict:
-        for k, v in b.items():
-            a[k] = update(dict(a[k]), v) if isinstance(v, dict) and isinstance(a.get(k), dict) else v
-        return a
-
-    out: dict = {}
-    for p in paths:
-        out = update(out, yaml.safe_load(Path(p).read_text()) or {})
-    return out
+    """The config files merged as Snakemake merges --configfile arguments (bench.schedule.merge_configs)."""
+    return merge_configs([yaml.safe_load(Path(p).read_text()) for p in paths])
 
 
 def parse_jobs(text: str) -> list[tuple[str, str]]:

@@ -29,6 +29,21 @@ import yaml
 from eigs.train.method_inputs import EVENT_METHODS
 
 
+def merge_configs(docs: list[dict]) -> dict:
+    """Config documents merged as Snakemake merges several --configfile arguments: later ones update earlier ones,
+    dictionaries key by key (so config/ladder.yaml adds runs to config/config.yaml's)."""
+
+    def update(a: dict, b: dict) -> dict:
+        for k, v in b.items():
+            a[k] = update(dict(a[k]), v) if isinstance(v, dict) and isinstance(a.get(k), dict) else v
+        return a
+
+    out: dict = {}
+    for d in docs:
+        out = update(out, d or {})
+    return out
+
+
 def jobs_of(cfg: dict) -> dict[str, tuple[str, list[str], int]]:
     """Job id → (benchmark name, dependencies, threads) for the `all` target of ``cfg``."""
     threads = int(cfg.get("threads", 2))

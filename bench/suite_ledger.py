@@ -40,7 +40,7 @@ from pathlib import Path
 import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from bench.schedule import LedgerError, jobs_of, read_benchmark  # noqa: E402
+from bench.schedule import LedgerError, jobs_of, merge_configs, read_benchmark  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT_LEDGER = REPO / "docs" / "suite"
@@ -91,13 +91,21 @@ class Job:
         return self.files[0]
 
 
-def load_config(path: Path) -> dict:
-    try:
-        cfg = yaml.safe_load(Path(path).read_text())
-    except (OSError, yaml.YAMLError) as err:
-        raise LedgerError(f"{path}: cannot read the config ({str(err).splitlines()[0]})") from None
-    if not isinstance(cfg, dict) or not isinstance(cfg.get("scenes"), dict):
-        raise LedgerError(f"{path}: not a workflow config (no `scenes:`)")
+def load_config(path: Path | Sequence[Path]) -> dict:
+    """A workflow config; several files are merged as Snakemake merges --configfile arguments (e.g. config/config.yaml
+    config/ladder.yaml)."""
+    paths = [path] if isinstance(path, (str, Path)) else list(path)
+    docs = []
+    for p in paths:
+        try:
+            docs.append(yaml.safe_load(Path(p).read_text()))
+        except (OSError, yaml.YAMLError) as err:
+            raise LedgerError(f"{p}: cannot read the config ({str(err).splitlines()[0]})") from None
+        if not isinstance(docs[-1], dict):
+            raise LedgerError(f"{p}: not a workflow config")
+    cfg = merge_configs(docs)
+    if not isinstance(cfg.get("scenes"), dict):
+        raise LedgerError(f"{', '.join(map(str, paths))}: not a workflow config (no `scenes:`)")
     return cfg
 
 
@@ -418,7 +426,8 @@ def main(argv: list[str] | None = None) -> int:
     sub = ap.add_subparsers(dest="command", required=True)
 
     def common(p: argparse.ArgumentParser) -> None:
-        p.add_argument("--config", type=Path, default=REPO / "config" / "config.yaml")
+        p.add_argument("--config", type=Path, nargs="+", default=[REPO / "config" / "config.yaml"],
+                       help="config file(s), merged as Snakemake merges them (default config/config.yaml)")
         p.add_argument("--ledger", type=Path, default=DEFAULT_LEDGER, help="the ledger folder (default docs/suite)")
 
     p = sub.add_parser("save", help="copy the jobs that finished in a workflow directory into the ledger")
