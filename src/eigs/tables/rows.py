@@ -23,6 +23,7 @@ DEFAULT_ROWS: dict[str, dict[str, str | None]] = {
         "besplat": "besplat",
         "bad-gaussians": "bad-gaussians",
         "eigs": "eigs",
+        "eigs-literal": "eigs-literal",
         "eigs+": "eigs+",
         "edi-3dgs": "edi-3dgs",
         "oracle": "oracle",
