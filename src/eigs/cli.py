@@ -31,6 +31,7 @@ COMMANDS: dict[str, str] = {
     "train": "eigs.train.cli",
     "render": "eigs.train.render_cli",
     "view": "eigs.view.cli",
+    "video": "eigs.view.video_cli",
     "evaluate": "eigs.evaluate.cli",
     "tables": "eigs.tables.cli",
     "figures": "eigs.tables.figures_cli",
