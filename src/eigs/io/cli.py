@@ -49,7 +49,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="keep events with START ≤ t < END and the views whose exposure lies inside (µs, source clock)",
     )
     parser.add_argument(
-        "--groundtruth", metavar="FILE", help="ground-truth poses 't tx ty tz qx qy qz qw' (T_world_cam)"
+        "--groundtruth",
+        metavar="FILE",
+        help="ground-truth poses 't tx ty tz qx qy qz qw' (T_world_cam); e2nerf-real: a ground-truth scene file "
+        "(eigs synth --e2nerf-real-layout writes it beside the layout), merged for scoring",
     )
     parser.add_argument(
         "--no-undistort",

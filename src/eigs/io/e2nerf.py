@@ -406,6 +406,48 @@ def read_e2nerf_real(folder: Path, opts: IngestOptions) -> tuple[Scene, list[str
     return scene, [f"calibration: {calib}"]
 
 
+GT_K_RTOL = 1e-9  # ground-truth camera vs the layout's (poses_bounds.npy hwf is stored in float64)
+
+
+def merge_groundtruth(scene: Scene, path: Path) -> tuple[Scene, str]:
+    """Merge a ground-truth scene file (``eigs synth --e2nerf-real-layout`` writes it beside the layout) into a
+    scene read from an E²NeRF real layout: its latent ground-truth poses (on the layout's per-view clock,
+    25001·k µs) replace the layout's ``poses_bounds.npy`` poses, and its sharp images become the scene's ground
+    truth. For scoring only: the sfm stage runs COLMAP on the EDI frames unless given poses are allowed
+    (``sfm: allow_given``, default true: set it false, or ``mode: colmap``), and uses the ground truth for its
+    accuracy report and the test cameras; evaluation scores against the sharp images. Returns (scene, note)."""
+    from eigs.scene import read_scene
+
+    if not path.is_file():
+        raise EigsError(path, "no such ground-truth file")
+    gt = read_scene(path, events=False)
+    cam, gcam = scene.camera, gt.camera
+    if (gcam.width, gcam.height) != (cam.width, cam.height) or not np.allclose(gcam.K, cam.K, rtol=GT_K_RTOL,
+                                                                              atol=0.0):
+        raise EigsError(path, f"ground-truth camera (K {gcam.K.tolist()}, {gcam.width}×{gcam.height}) differs from "
+                        f"the layout's (K {cam.K.tolist()}, {cam.width}×{cam.height})")
+    if gt.channels != scene.channels:
+        raise EigsError(path, f"ground truth has {gt.channels} channel(s), the layout's images {scene.channels}")
+    if gt.poses is None or gt.poses.source != "ground-truth":
+        raise EigsError(path, "holds no ground-truth latent poses")
+    lt = scene.poses.latent_t_us
+    if gt.poses.latent_t_us.shape != lt.shape or not np.array_equal(gt.poses.latent_t_us, lt):
+        raise EigsError(path, f"ground-truth latent times {gt.poses.latent_t_us.shape} differ from the layout's "
+                        f"({scene.n_views} views at 25001·k µs)")
+    if gt.sharp is None:
+        raise EigsError(path, "holds no sharp ground-truth images")
+    blur = gt.sharp.kind == SHARP_KIND_BLUR_VIEW
+    if np.any(blur & ((gt.sharp.view < 0) | (gt.sharp.view >= scene.n_views))):
+        raise EigsError(path, f"blur-view ground truth names views outside 0..{scene.n_views - 1}")
+    s = Scene(**scene.__dict__)
+    s.poses = gt.poses
+    s.sharp = gt.sharp
+    s.source = f"{scene.source} + ground truth {path} (scoring only)"
+    note = (f"ground truth: {path.name} (latent poses, {len(gt.sharp.kind)} sharp images; for scoring: sfm "
+            "report and test cameras, evaluation)")
+    return s, note
+
+
 def select_views(scene: Scene, idx: np.ndarray) -> Scene:
     """Keep training views ``idx`` (M,) of an in-memory scene: frames, binned events, poses; blur-view ground
     truth of dropped views is dropped, the rest renumbered; novel views are kept."""
@@ -434,13 +476,17 @@ def ingest_e2nerf(fmt: str, source: str, out: str | Path, opts: IngestOptions) -
     """Read an E²NeRF layout and write the scene atomically; returns the summary."""
     from eigs.scene import summarize, write_scene
 
-    opts.refuse(fmt, "exposure_us", "time_window", "keep_events", "groundtruth", "time_unit", "frames", "sensor_size",
+    opts.refuse(fmt, "exposure_us", "time_window", "keep_events", "time_unit", "frames", "sensor_size",
                 "frames_homography", "time_offset_us")
     folder = Path(source)
     if fmt == "e2nerf-synthetic":
+        opts.refuse(fmt, "groundtruth")
         scene, notes = read_e2nerf_synthetic(folder, opts)
     else:
         scene, notes = read_e2nerf_real(folder, opts)
+        if opts.groundtruth is not None:
+            scene, note = merge_groundtruth(scene, Path(opts.groundtruth))
+            notes.append(note)
     if opts.views is not None:
         scene = select_views(scene, parse_views(opts.views, scene.n_views))
     write_scene(scene, out, compression=opts.compression)

@@ -21,12 +21,35 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default="{}",
         help='JSON object of scene parameters, applied after --config, e.g. \'{"seed": 3, "shake": 0}\'',
     )
+    parser.add_argument(
+        "--preset",
+        metavar="NAME",
+        help="a named camera/capture preset applied over the scene's defaults and under --config/--overrides "
+        "(e.g. davis346; eigs synth --list shows them)",
+    )
     parser.add_argument("-o", "--output", metavar="scene.h5", help="scene file to write")
     parser.add_argument("--contact-sheet", metavar="sheet.png", help="also write a contact sheet PNG")
     parser.add_argument(
         "--e2nerf-layout",
         metavar="DIR",
         help="also write the E²NeRF synthetic layout (transform_train.json, train/, test/, events.pt) to DIR",
+    )
+    parser.add_argument(
+        "--e2nerf-real-layout",
+        metavar="DIR",
+        help="also write the E²NeRF real (LLFF) layout (images/, events.pt, poses_bounds.npy; no ground truth) to "
+        "DIR, and its ground truth to --groundtruth-out",
+    )
+    parser.add_argument(
+        "--groundtruth-out",
+        metavar="FILE.h5",
+        help="with --e2nerf-real-layout: the ground-truth scene file, outside DIR (default DIR.groundtruth.h5)",
+    )
+    parser.add_argument(
+        "--image-format",
+        choices=("jpg", "png"),
+        default="jpg",
+        help="with --e2nerf-real-layout: jpg (quality 95, as E²NeRF) or png (lossless); default jpg",
     )
 
 
@@ -39,6 +62,12 @@ def _list() -> str:
         lines.append(f"  {name:8s} {spec.description}" + (f"  [{own}]" if own else ""))
     lines.append("parameters (defaults; override with --config/--overrides):")
     lines += [f"  {k} = {v!r}" for k, v in DEFAULTS.items()]
+    from eigs.synth.scenes import PRESET_SOURCES, PRESETS
+
+    lines.append("presets (--preset NAME or \"preset\": NAME; sources in docs/synthetic.md):")
+    for name, values in PRESETS.items():
+        lines.append(f"  {name}:")
+        lines += [f"    {k} = {v!r}    # {PRESET_SOURCES[name][k]}" for k, v in values.items()]
     return "\n".join(lines)
 
 
@@ -72,6 +101,8 @@ def _load_overrides(args: argparse.Namespace) -> list[tuple[str, dict | None]]:
         raise EigsError("--overrides", f"not valid JSON ({err})") from None
     if not isinstance(ov, dict):
         raise EigsError("--overrides", "must be a JSON object of parameter → value")
+    if getattr(args, "preset", None):
+        layers.insert(0, ("--preset", {"preset": args.preset}))
     layers.append(("--overrides", ov))
     return layers
 
@@ -84,8 +115,11 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if not args.scene:
         raise EigsError("--scene", "give a built-in scene name (eigs synth --list shows them)")
-    if not (args.output or args.e2nerf_layout or args.contact_sheet):
-        raise EigsError("-o", "nothing to write: give -o scene.h5 (and/or --contact-sheet, --e2nerf-layout)")
+    if not (args.output or args.e2nerf_layout or args.contact_sheet or args.e2nerf_real_layout):
+        raise EigsError("-o", "nothing to write: give -o scene.h5 (and/or --contact-sheet, --e2nerf-layout, "
+                        "--e2nerf-real-layout)")
+    if args.groundtruth_out and not args.e2nerf_real_layout:
+        raise EigsError("--groundtruth-out", "only with --e2nerf-real-layout")
     from eigs.synth.scenes import get_spec
 
     get_spec(args.scene)  # fail fast on a bad name
@@ -106,4 +140,9 @@ def run(args: argparse.Namespace) -> int:
         from eigs.synth.export_e2nerf import write_e2nerf_synthetic
 
         write_e2nerf_synthetic(g, args.e2nerf_layout)
+    if args.e2nerf_real_layout:
+        from eigs.synth.export_e2nerf_real import write_e2nerf_real
+
+        write_e2nerf_real(g, args.e2nerf_real_layout, groundtruth=args.groundtruth_out,
+                          image_format=args.image_format)
     return 0

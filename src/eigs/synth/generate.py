@@ -125,6 +125,11 @@ def _sensor(p: dict[str, Any]) -> SensorParams:
         refractory_us=p["refractory_us"],
         shot_noise_hz=p["shot_noise_hz"],
         leak_rate_hz=p["leak_rate_hz"],
+        shot_noise_inten_factor=p["shot_noise_inten_factor"],
+        leak_rate_cov_decades=p["leak_rate_cov_decades"],
+        leak_random_phase=p["leak_random_phase"],
+        hot_pixel_fraction=p["hot_pixel_fraction"],
+        hot_pixel_rate_hz=p["hot_pixel_rate_hz"],
     )
 
 
@@ -183,9 +188,16 @@ def generate(
     sim = EventSimulator(height, width, sensor, rng_sensor)
     ss = p["supersample"]
 
+    light = float(p["light_level"])
+
+    def dim(rgb: np.ndarray) -> np.ndarray:
+        """Low light: the linear render × ``light_level`` (untouched at 1, so default scenes stay bit-identical)."""
+        return rgb if light == 1.0 else (rgb * np.float32(light)).astype(rgb.dtype, copy=False)
+
     def render(times: np.ndarray, want_depth: bool = False):
-        return caster.render(path(times), K, width, height, supersample=ss, want_depth=want_depth,
-                             threads=threads)
+        res = caster.render(path(times), K, width, height, supersample=ss, want_depth=want_depth, threads=threads)
+        res.rgb = dim(res.rgb)
+        return res
 
     blurry = np.zeros((n_views, height, width, 3), np.uint8)
     sharp0 = np.zeros((n_views, height, width, 3), np.uint8)
@@ -256,7 +268,7 @@ def generate(
     n_novel = p["n_novel"]
     novel_c2w = novel_orbit.poses()[:n_novel]
     t0 = time.perf_counter()
-    novel_rgb = (caster.render(novel_c2w, K, width, height, supersample=ss, threads=threads).rgb if n_novel
+    novel_rgb = (dim(caster.render(novel_c2w, K, width, height, supersample=ss, threads=threads).rgb) if n_novel
                  else np.zeros((0, height, width, 3), np.float32))
     t_render += time.perf_counter() - t0
     sharp = SharpImages(
@@ -267,7 +279,7 @@ def generate(
                             ).astype(np.uint8),
         view=np.concatenate([np.arange(n_views), np.full(n_novel, -1)]).astype(np.int64),
     )
-    background = encode(np.asarray(spec.background), p["camera_response"]).astype(np.float64) / 255.0
+    background = encode(np.asarray(spec.background) * light, p["camera_response"]).astype(np.float64) / 255.0
     scene = Scene(
         name=name,
         camera=Camera(K=K, width=width, height=height),
@@ -276,7 +288,8 @@ def generate(
         synthetic=True,
         background=background,
         contrast_threshold=float(p["contrast_threshold"]),
-        source=f"eigs synth --scene {name} (seed {p['seed']})",
+        source=f"eigs synth --scene {name} (seed {p['seed']}"
+        + (f", preset {p['preset']})" if p["preset"] else ")"),
         frames=Frames(blurry=blurry, exposure_us=exposures.astype(np.int64)),
         events=events,
         poses=Poses(latent_c2w=latent_c2w, latent_t_us=latent_t.astype(np.int64), source="ground-truth"),

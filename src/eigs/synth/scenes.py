@@ -52,6 +52,7 @@ DEFAULTS: dict[str, Any] = {
     "supersample": 2,
     "texture_size": 128,
     "camera_response": "linear",  # or "srgb": how linear intensity is encoded in the uint8 frames
+    "light_level": 1.0,  # scene illumination multiplier on the linear render (< 1: low light; frames and events)
     # event sensor
     "contrast_threshold": 0.2,
     "threshold_pos": None,
@@ -60,8 +61,72 @@ DEFAULTS: dict[str, Any] = {
     "refractory_us": 100.0,
     "shot_noise_hz": 0.05,
     "leak_rate_hz": 0.05,
+    "leak_rate_cov_decades": 0.0,  # per-pixel log-normal spread of the leak rate (decades, v2e)
+    "leak_random_phase": False,  # start each pixel's leak at a random phase (a sensor already running)
+    "shot_noise_inten_factor": 1.0,  # shot-noise rate × (1 + (f − 1)·inten01) (v2e: 0.25); 1: uniform
+    "hot_pixel_fraction": 0.0,  # fraction of pixels that fire on their own
+    "hot_pixel_rate_hz": 0.0,  # their rate (Poisson, random polarity)
     "reset_at_exposure": False,  # reset every pixel's reference at each exposure start (tests)
     "seed": 0,
+    "preset": None,  # a named sensor/capture preset (PRESETS), applied over the scene's defaults
+}
+
+# Named presets: a camera and capture setting applied over a scene's own defaults and under the user's overrides
+# (any built-in scene). Every value's source is in PRESET_SOURCES and docs/synthetic.md ("Presets").
+PRESETS: dict[str, dict[str, Any]] = {
+    "davis346": {
+        "width": 346,
+        "height": 260,
+        "n_train": 30,
+        "n_novel": 15,
+        "exposure_us": 100_000,
+        "period_us": 1_000_000,
+        "gap_subframes": 40,
+        "light_level": 0.4,
+        "contrast_threshold": 0.19,
+        "threshold_pos": 0.21,
+        "threshold_neg": 0.17,
+        "threshold_sigma": 0.05,
+        "refractory_us": 500.0,
+        "shot_noise_hz": 5.0,
+        "shot_noise_inten_factor": 0.25,
+        "leak_rate_hz": 0.1,
+        "leak_rate_cov_decades": 0.1,
+        "leak_random_phase": True,
+        "hot_pixel_fraction": 0.0025,
+        "hot_pixel_rate_hz": 29.0,
+    },
+}
+_V2E = "SensorsINI/v2e@b0ae3bcb6eec237e995d53f6d78f867d4676ffaa"
+PRESET_SOURCES: dict[str, dict[str, str]] = {
+    "davis346": {
+        "width": "DAVIS346 sensor 346×260 (iniVation libcaer davis.h, DAVIS346 chip ids; E²NeRF paper §5.1)",
+        "height": "as width",
+        "n_train": "E²NeRF paper §5.1: 30 blurry views per real scene",
+        "n_novel": "ours: held-out views for scoring (the real E²NeRF scenes have none)",
+        "exposure_us": "E²NeRF paper §5.1: APS exposure 100 ms",
+        "period_us": "E²NeRF real preprocessing keeps every 10th APS frame (data-preprocessing.py), frames ≥ 100 ms "
+                     "apart at a 100 ms exposure: ≥ 1 s between views",
+        "gap_subframes": "ours: keeps the gap steps at 22.5 ms (period − exposure must divide)",
+        "light_level": "[assumed] E²NeRF paper §5.1 records at 5–100 lux; 0.4 makes the mean blurry frame ≈ 0.1–0.2 "
+                       "linear, as dark as the real DAVIS346 frames (davis346_lab: mean 51/255)",
+        "contrast_threshold": "mean of threshold_pos and threshold_neg (the scene's nominal C)",
+        "threshold_pos": f"v2e EventEmulator docstring, nominal ON threshold 0.21 ({_V2E} v2ecore/emulator.py)",
+        "threshold_neg": "v2e EventEmulator docstring, nominal OFF threshold 0.17 (same file)",
+        "threshold_sigma": "v2e dvs_params 'noisy' preset: sigma_thres 0.05 (emulator.py set_dvs_params)",
+        "refractory_us": f"v2e CLI default --refractory_period 0.5 ms ({_V2E} v2ecore/v2e_args.py)",
+        "shot_noise_hz": "v2e dvs_params 'noisy' preset: shot_noise_rate_hz 5 (low light; the CLI default 0.001 Hz "
+                         "is 'for good lighting')",
+        "shot_noise_inten_factor": "v2e SHOT_NOISE_INTEN_FACTOR 0.25 with inten01 = (DN + 20)/275 "
+                                   "(emulator.py, emulator_utils.py generate_shot_noise, rescale_intensity_frame)",
+        "leak_rate_hz": "v2e dvs_params 'noisy' preset and EventEmulator default: leak_rate_hz 0.1",
+        "leak_rate_cov_decades": "v2e --noise_rate_cov_decades default 0.1 (log-normal per-pixel leak rate)",
+        "leak_random_phase": "[assumed] steady state of a sensor that was already running (v2e's earlier code set a "
+                             "random initial leak offset; emulator.py keeps it commented out)",
+        "hot_pixel_fraction": "measured on ../shared/data/real/davis346_lab (aestream sample, DAVIS346): 18 of 7,230 "
+                              "still pixels fire ≥ 3 times in 0.13 s (an upper bound: flicker may add to it)",
+        "hot_pixel_rate_hz": "measured there: those pixels fire at 29 Hz on average, both polarities",
+    },
 }
 
 _INT_KEYS = {
@@ -69,8 +134,9 @@ _INT_KEYS = {
     "lead_subframes", "n_bins", "supersample", "texture_size", "seed",
 }
 _OPTIONAL_FLOAT_KEYS = {"threshold_pos", "threshold_neg"}
-_BOOL_KEYS = {"reset_at_exposure"}
+_BOOL_KEYS = {"reset_at_exposure", "leak_random_phase"}
 _STR_KEYS = {"camera_response": ("linear", "srgb")}
+_OPTIONAL_STR_KEYS = {"preset": tuple(PRESETS)}
 
 
 @dataclass
@@ -290,6 +356,10 @@ def _coerce(key: str, value: Any, where: str) -> Any:
         if not isinstance(value, bool):
             raise EigsError(where, f"{key} must be true or false, got {value!r}")
         return value
+    if key in _OPTIONAL_STR_KEYS:
+        if value is not None and value not in _OPTIONAL_STR_KEYS[key]:
+            raise EigsError(where, f"{key} must be null or one of {_OPTIONAL_STR_KEYS[key]}, got {value!r}")
+        return value
     if key in _STR_KEYS:
         if value not in _STR_KEYS[key]:
             raise EigsError(where, f"{key} must be one of {_STR_KEYS[key]}, got {value!r}")
@@ -308,15 +378,21 @@ def _coerce(key: str, value: Any, where: str) -> Any:
 
 
 def resolve_params(name: str, *layers: tuple[str, dict[str, Any] | None]) -> dict[str, Any]:
-    """Parameters of scene ``name``: :data:`DEFAULTS` ← the scene's defaults ← each ``(where, overrides)`` layer in
-    order (``where`` names the source in error messages). Unknown keys and bad values raise :class:`EigsError`."""
+    """Parameters of scene ``name``: :data:`DEFAULTS` ← the scene's defaults ← the preset (the last ``preset`` any
+    layer names, :data:`PRESETS`) ← each ``(where, overrides)`` layer in order (``where`` names the source in error
+    messages). Unknown keys and bad values raise :class:`EigsError`."""
     spec = get_spec(name)
     params = {**DEFAULTS, **spec.params}
     for where, layer in layers:
+        if layer and not isinstance(layer, dict):
+            raise EigsError(where, f"overrides must be a mapping of parameter → value, got {type(layer).__name__}")
+        if layer and "preset" in layer:
+            params["preset"] = _coerce("preset", layer["preset"], where)
+    if params["preset"] is not None:
+        params.update(PRESETS[params["preset"]])
+    for where, layer in layers:
         if not layer:
             continue
-        if not isinstance(layer, dict):
-            raise EigsError(where, f"overrides must be a mapping of parameter → value, got {type(layer).__name__}")
         unknown = sorted(set(layer) - set(DEFAULTS))
         if unknown:
             raise EigsError(where, f"unknown parameter(s) {', '.join(map(repr, unknown))}; known: "
@@ -363,5 +439,8 @@ def check_params(p: dict[str, Any], where: str = "parameters") -> None:
     need(p["contrast_threshold"] > 0, "contrast_threshold must be > 0")
     for k in ("threshold_pos", "threshold_neg"):
         need(p[k] is None or p[k] > 0, f"{k} must be > 0 or null")
-    for k in ("threshold_sigma", "refractory_us", "shot_noise_hz", "leak_rate_hz"):
+    for k in ("threshold_sigma", "refractory_us", "shot_noise_hz", "leak_rate_hz", "leak_rate_cov_decades",
+              "shot_noise_inten_factor", "hot_pixel_rate_hz"):
         need(p[k] >= 0, f"{k} must be ≥ 0, got {p[k]}")
+    need(0 < p["light_level"] <= 1, f"light_level must lie in (0, 1], got {p['light_level']}")
+    need(0 <= p["hot_pixel_fraction"] <= 1, f"hot_pixel_fraction must lie in [0, 1], got {p['hot_pixel_fraction']}")

@@ -14,7 +14,14 @@ stamped inside an exposure [start, end) are exactly those of its sub-frame steps
 - leak events: the reference drifts down at ``leak_rate_hz``·C_on per second, producing ON events at about
   that rate in static pixels (v2e's leak model); implemented as a linear drift added to L;
 - shot noise: Poisson events of random polarity at ``shot_noise_hz`` per pixel, uniform in time; they do
-  not move the reference.
+  not move the reference. With ``shot_noise_inten_factor`` f ≠ 1 the rate of a pixel is
+  shot_noise_hz·(1 + (f − 1)·inten01), inten01 = (255·Y + 20)/275 from the step's end frame (v2e's
+  intensity dependence: f = 0.25 makes dark pixels noisier than bright ones);
+- leak options (v2e): ``leak_rate_cov_decades`` spreads the leak rate per pixel log-normally (rate ×
+  10^(σ·N(0, 1))); ``leak_random_phase`` starts each pixel a uniform fraction of C_on towards its first leak
+  event (a sensor that was already running; otherwise every pixel's first leak event comes at 1/rate);
+- hot pixels: a fixed random ``hot_pixel_fraction`` of the pixels fires Poisson events of random polarity at
+  ``hot_pixel_rate_hz`` (they do not move the reference).
 
 The invariant −C_off < L − ref < C_on holds after every frame, so all crossings of a step lie inside it.
 """
@@ -49,6 +56,11 @@ class SensorParams:
     refractory_us: float = 100.0
     shot_noise_hz: float = 0.0
     leak_rate_hz: float = 0.0
+    shot_noise_inten_factor: float = 1.0
+    leak_rate_cov_decades: float = 0.0
+    leak_random_phase: bool = False
+    hot_pixel_fraction: float = 0.0
+    hot_pixel_rate_hz: float = 0.0
 
     def check(self) -> None:
         for name in ("contrast_threshold", "threshold_min"):
@@ -59,10 +71,14 @@ class SensorParams:
             v = getattr(self, name)
             if v is not None and not (np.isfinite(v) and v > 0):
                 raise EigsError(None, f"sensor parameter {name} must be a positive number or null, got {v}")
-        for name in ("threshold_sigma", "refractory_us", "shot_noise_hz", "leak_rate_hz"):
+        for name in ("threshold_sigma", "refractory_us", "shot_noise_hz", "leak_rate_hz", "shot_noise_inten_factor",
+                     "leak_rate_cov_decades", "hot_pixel_rate_hz"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v >= 0):
                 raise EigsError(None, f"sensor parameter {name} must be ≥ 0, got {v}")
+        if not 0 <= self.hot_pixel_fraction <= 1:
+            raise EigsError(None, "sensor parameter hot_pixel_fraction must lie in [0, 1], got "
+                            f"{self.hot_pixel_fraction}")
 
     @property
     def c_pos(self) -> float:
@@ -108,6 +124,16 @@ class EventSimulator:
         if sig > 0:
             self.c_on = np.maximum(rng.normal(params.c_pos, sig, shape), params.threshold_min)
             self.c_off = np.maximum(rng.normal(params.c_neg, sig, shape), params.threshold_min)
+        # per-pixel leak rate (Hz): v2e's log-normal spread; drawn only when used (keeps older streams identical)
+        self.leak_rate: np.ndarray | float = params.leak_rate_hz
+        if params.leak_rate_hz > 0 and params.leak_rate_cov_decades > 0:
+            self.leak_rate = params.leak_rate_hz * np.exp(
+                np.log(10.0) * params.leak_rate_cov_decades * rng.standard_normal(shape))
+        self.hot_pixels = np.zeros(0, np.int64)
+        if params.hot_pixel_fraction > 0 and params.hot_pixel_rate_hz > 0:
+            n_hot = int(round(params.hot_pixel_fraction * self.h * self.w))
+            self.hot_pixels = np.sort(rng.choice(self.h * self.w, size=n_hot, replace=False)).astype(np.int64)
+        self._phase_pending = bool(params.leak_random_phase and params.leak_rate_hz > 0)
         self.ref = np.zeros(shape)
         self.last_emit = np.full(shape, -np.inf)
         self.L = np.zeros(shape)
@@ -119,13 +145,19 @@ class EventSimulator:
 
     def _drift(self, t_us: float) -> np.ndarray | float:
         """Leak as an upward drift of L (equivalently a downward drift of ref): leak_rate·C_on·t."""
-        rate = self.params.leak_rate_hz
-        return 0.0 if rate == 0 else self.c_on * (rate * t_us * 1e-6)
+        if self.params.leak_rate_hz == 0:
+            return 0.0
+        return self.c_on * (self.leak_rate * (t_us * 1e-6))
 
     def reset(self, log_frame: np.ndarray, t_us: float) -> None:
-        """Set every pixel's reference to ``log_frame`` (H, W) at time ``t_us`` (µs)."""
+        """Set every pixel's reference to ``log_frame`` (H, W) at time ``t_us`` (µs). With ``leak_random_phase``
+        the first reset puts each reference a uniform fraction u ∈ [0, 1) of C_on below L, so the pixel's first
+        leak event comes after (1 − u)/rate instead of 1/rate."""
         L = np.asarray(log_frame, dtype=np.float64) + self._drift(t_us)
         self.ref = L.copy()
+        if self._phase_pending:
+            self.ref -= self.rng.random(L.shape) * self.c_on
+            self._phase_pending = False
         self.L = L
         self.t = float(t_us)
 
@@ -178,13 +210,27 @@ class EventSimulator:
             )
             self.ref = ref + n_on * self.c_on - n_off * self.c_off
         rate = self.params.shot_noise_hz
-        if rate > 0:
+        f = self.params.shot_noise_inten_factor
+        if rate > 0 and f == 1.0:
             m = int(self.rng.poisson(rate * self.h * self.w * (t1 - t0) * 1e-6))
             if m:
                 pix = self.rng.integers(0, self.h * self.w, m)
-                te = self.rng.uniform(t0, t1, m)
-                p = np.where(self.rng.random(m) < 0.5, 1, -1).astype(np.int8)
-                chunks.append(EventChunk((pix % self.w).astype(np.uint16), (pix // self.w).astype(np.uint16), te, p))
+                chunks.append(self._random_events(pix, t0, t1))
+        elif rate > 0:
+            # thinning: candidates at the largest rate, each kept with probability rate(pixel)/largest rate
+            peak = rate * max(1.0, f)
+            m = int(self.rng.poisson(peak * self.h * self.w * (t1 - t0) * 1e-6))
+            if m:
+                pix = self.rng.integers(0, self.h * self.w, m)
+                y_lin = np.clip(np.exp(np.asarray(log_frame, np.float64).ravel()[pix]) - LOG_EPS, 0.0, 1.0)
+                inten01 = (255.0 * y_lin + 20.0) / 275.0
+                keep = self.rng.random(m) * peak < rate * (1.0 + (f - 1.0) * inten01)
+                if keep.any():
+                    chunks.append(self._random_events(pix[keep], t0, t1))
+        if self.hot_pixels.size:
+            k = self.rng.poisson(self.params.hot_pixel_rate_hz * (t1 - t0) * 1e-6, self.hot_pixels.size)
+            if k.any():
+                chunks.append(self._random_events(np.repeat(self.hot_pixels, k), t0, t1))
         self.L, self.t = L1, t1
         out = EventChunk.concat(chunks)
         if len(out):
@@ -196,6 +242,14 @@ class EventSimulator:
         else:
             out.t = out.t.astype(np.int64)
         return out
+
+
+    def _random_events(self, pix: np.ndarray, t0: float, t1: float) -> EventChunk:
+        """Noise events at flat pixel indices ``pix``: times uniform in [t0, t1) µs, polarity ±1 with equal odds."""
+        m = pix.size
+        te = self.rng.uniform(t0, t1, m)
+        p = np.where(self.rng.random(m) < 0.5, 1, -1).astype(np.int8)
+        return EventChunk((pix % self.w).astype(np.uint16), (pix // self.w).astype(np.uint16), te, p)
 
 
 def simulate(
