@@ -184,6 +184,14 @@ def extract(
     ext.num_threads = opts.num_threads
     ext.sift.max_num_features = opts.max_num_features
     ext.max_image_size = max(4096, max(width, height) * f)
+    # Image ids in the order of ``names``: with several threads the extractor writes each image (and gives it its
+    # id) when its features are done, so ids, and with them matching, triangulation and mapping orders, changed
+    # from run to run. Importing the images first (one thread, in order) fixes the ids; the extractor then only
+    # adds features to the images it finds in the database.
+    pycolmap.Database.open(db_path).close()  # creates it when absent (import_images needs the file)
+    pycolmap.import_images(
+        db_path, src, camera_mode=pycolmap.CameraMode.SINGLE, image_names=list(names), options=reader
+    )
     pycolmap.extract_features(
         db_path,
         src,
