@@ -148,7 +148,8 @@ def run_bins(run):
 
 def scene_has_ground_truth(scene):
     s = SCENES[scene]
-    return "builtin" in s or s.get("format") == "e2nerf-synthetic"
+    merged = "simulate" in s and "--groundtruth" in s.get("options", [])  # rules/synth.smk synth_e2nerf_real
+    return "builtin" in s or s.get("format") == "e2nerf-synthetic" or merged
 
 
 def run_scenes(run):

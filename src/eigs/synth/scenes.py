@@ -108,8 +108,9 @@ PRESET_SOURCES: dict[str, dict[str, str]] = {
         "period_us": "E²NeRF real preprocessing keeps every 10th APS frame (data-preprocessing.py), frames ≥ 100 ms "
                      "apart at a 100 ms exposure: ≥ 1 s between views",
         "gap_subframes": "ours: keeps the gap steps at 22.5 ms (period − exposure must divide)",
-        "light_level": "[assumed] E²NeRF paper §5.1 records at 5–100 lux; 0.4 makes the mean blurry frame ≈ 0.1–0.2 "
-                       "linear, as dark as the real DAVIS346 frames (davis346_lab: mean 51/255)",
+        "light_level": "[assumed] E²NeRF paper §5.1 records at 5–100 lux but states no frame brightness; 0.4 gives "
+                       "mean blurry frames of 0.05–0.07 linear (13–18 of 255) on the six scenes (davis346_lab, a lit "
+                       "lab at 4.8 ms: 0.20)",
         "contrast_threshold": "mean of threshold_pos and threshold_neg (the scene's nominal C)",
         "threshold_pos": f"v2e EventEmulator docstring, nominal ON threshold 0.21 ({_V2E} v2ecore/emulator.py)",
         "threshold_neg": "v2e EventEmulator docstring, nominal OFF threshold 0.17 (same file)",
