@@ -77,7 +77,28 @@ def jobs_of(cfg: dict) -> dict[str, tuple[str, list[str], int]]:
             evals.append(f"evaluate:{s}:{r}")
     jobs["tables"] = ("tables", evals, 1)
     jobs["figures"] = ("figures", evals, 1)
+    for s, deps in video_trainings(cfg, jobs).items():
+        jobs[f"video:{s}"] = (f"video/{s}", deps, 1)
     return jobs
+
+
+def video_trainings(cfg: dict, jobs: dict) -> dict[str, list[str]]:
+    """Scene → the training jobs its orbit video renders (rules/common_video.smk: `video: runs:`, else the runs of
+    Table I's rows eigs.view.video.VideoOptions.table1_rows)."""
+    from eigs.tables.rows import table_rows
+    from eigs.view.video import VideoOptions
+
+    runs = cfg.get("runs", {})
+    shown = (cfg.get("video") or {}).get("runs")
+    if shown is None:
+        table1 = table_rows(cfg.get("tables"))["table1"]
+        shown = [table1[k] for k in VideoOptions().table1_rows if table1.get(k) in runs]
+    out: dict[str, list[str]] = {}
+    for s in cfg["scenes"]:
+        deps = [f"train:{s}:{r}" for r in dict.fromkeys(shown) if f"train:{s}:{r}" in jobs]
+        if deps:
+            out[s] = deps
+    return out
 
 
 class LedgerError(Exception):

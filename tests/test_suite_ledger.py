@@ -227,7 +227,7 @@ def test_missing_lists_exactly_the_unfinished_targets(workflow, tmp_path, capsys
     assert out.splitlines() == ["train: 3 done, 1 missing", "evaluate: 2 done, 2 missing",
                                 "resources: 1 done, 0 missing", "scene: 2 done, 0 missing", "edi: 2 done, 0 missing",
                                 "sfm: 2 done, 0 missing", "init: 2 done, 0 missing", "tables: 0 done, 1 missing",
-                                "figures: 0 done, 1 missing"]  # fmt: skip
+                                "figures: 0 done, 1 missing", "video: 0 done, 2 missing"]  # fmt: skip
     # a job whose benchmark file is there but not its files (an interrupted copy) is missing
     (ledger / "results/alpha/b4/3dgs/train_log.csv").unlink()
     _, out, _ = ledger_main("missing", "--config", cfg, "--ledger", ledger, "--rule", "train", capsys=capsys)
@@ -300,7 +300,7 @@ def test_ledger_is_a_run_for_suite_report_and_eigs_tables(workflow, tmp_path, ca
                                       "--out", str(report)])  # fmt: skip
     suite_report.main()
     text = report.read_text()
-    assert "14 of 19 jobs have run" in text
+    assert "14 of 21 jobs have run" in text
     # 3dgs: CPU s mean (250, 252), wall (300, 302), final PSNR (21.25, 20.5), largest gap 0.25 (alpha)
     assert "| 3dgs | 3dgs | 20 | 2 | 251 | 301 | 20.88 | 0.25 | yes |" in text
     assert "## Tables" in text and "## Schedule" not in text and "## Plateau references" not in text
@@ -344,7 +344,7 @@ def test_schedule_of_a_complete_ledger_without_tables_and_figures_jobs(workflow,
                                       "--out", str(report)])  # fmt: skip
     suite_report.main()
     text = report.read_text()
-    assert "## Schedule" in text and "figures and tables not measured, counted as 0 s" in text
+    assert "## Schedule" in text and "the figures and tables and video jobs not measured, counted as 0 s" in text
 
 
 @pytest.mark.parametrize(
