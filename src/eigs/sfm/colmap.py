@@ -24,6 +24,11 @@ log = logging.getLogger(__name__)
 
 EXHAUSTIVE_MAX_IMAGES = 150  # beyond this, sequential + spatial matching
 FEATURE_TARGET_PX = 256  # upsample until the longer side reaches this (integer factor ≤ 4)
+# Threads of COLMAP's mapper, fixed-pose triangulation and bundle adjustment, whatever ``num_threads`` says: Ceres on
+# two threads sums in another order from run to run (blocks, the same database mapped twice at 2 threads: camera
+# poses 1.6e-11 apart, other bytes), and on these frames a second thread did not make mapping faster (13.8–21.1 s
+# at one thread, 16.4–22.8 s at two, shared 2-core machine). docs/sfm.md, "Reproducibility".
+MAPPER_THREADS = 1
 
 
 def load_pycolmap():
@@ -83,11 +88,25 @@ def pixel_scale(opts: ColmapOptions, width: int, height: int) -> float:
     return 1.0 / feature_scale(width, height, opts.feature_scale)
 
 
-def verification_options(px: float):
+def verification_seed(opts: ColmapOptions) -> int:
+    """RANSAC seed of two-view verification: ``opts.seed`` when matching runs on several threads, else -1.
+
+    Unseeded (-1), each verifier thread draws from its own generator, seeded once (COLMAP's default 0) and consumed
+    pair after pair: on one thread that sequence is fixed, on several it depends on which thread verified which
+    pairs before (blocks at 2 threads: 1410 of 7140 two-view geometries differed between two runs). Seeded, every
+    RANSAC call restarts the generator, so a pair's result no longer depends on its thread. One thread stays
+    unseeded so that single-threaded outputs (the default suite's) are those of earlier versions."""
+    return -1 if opts.num_threads == 1 else int(opts.seed)
+
+
+def verification_options(px: float, seed: int = -1):
+    """Two-view verification: RANSAC threshold 4 px scaled by ``px``, RANSAC ``seed`` (see
+    :func:`verification_seed`)."""
     import pycolmap
 
     v = pycolmap.TwoViewGeometryOptions()
     v.ransac.max_error = 4.0 * px
+    v.ransac.random_seed = int(seed)
     return v
 
 
@@ -268,7 +287,7 @@ def match(
     m = pycolmap.FeatureMatchingOptions()
     m.num_threads = opts.num_threads
     dev = device(opts.device)
-    ver = verification_options(px)
+    ver = verification_options(px, verification_seed(opts))
     if spatial:
         pairing = pycolmap.SpatialPairingOptions()
         pairing.max_num_neighbors = max(20, 4 * n_latent)
@@ -308,7 +327,8 @@ def map_images(
     fixed_intrinsics: bool = True,
     px: float = 1.0,
 ) -> MappingResult:
-    """Incremental (or global) mapping; keeps the model with the most registered images."""
+    """Incremental (or global) mapping; keeps the model with the most registered images. Incremental mapping
+    runs on :data:`MAPPER_THREADS` threads (reproducible); global mapping on ``opts.num_threads``."""
     import pycolmap
 
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -319,7 +339,7 @@ def map_images(
         recs = pycolmap.global_mapping(db_path, image_dir, out_dir, options=g)
     else:
         o = pycolmap.IncrementalPipelineOptions()
-        o.num_threads = opts.num_threads
+        o.num_threads = MAPPER_THREADS
         o.random_seed = opts.seed
         refine = opts.refine_intrinsics or not fixed_intrinsics
         o.ba_refine_focal_length = refine

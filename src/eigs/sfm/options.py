@@ -20,7 +20,10 @@ class ColmapOptions:
     then exhaustive when the scene is still split into several models) | exhaustive | sequential;
     ``global_mapping``: GLOMAP instead of incremental mapping; ``refine_intrinsics``: let bundle adjustment
     refine the focal length; ``feature_scale``: SIFT upsampling, None for automatic;
-    ``device``: auto | cpu | cuda; ``seed``: of COLMAP's RANSAC and mapper."""
+    ``device``: auto | cpu | cuda; ``num_threads``: of feature extraction and matching (incremental mapping,
+    fixed-pose triangulation and bundle adjustment run on one thread, ``colmap.MAPPER_THREADS``: reproducible);
+    ``seed``: of COLMAP's RANSAC and mapper (two-view verification is seeded only when matching runs on several
+    threads: ``colmap.verification_seed``). docs/sfm.md, "Reproducibility"."""
 
     matcher: str = "auto"
     global_mapping: bool = False

@@ -72,11 +72,11 @@ def reject_sibling_outliers(
     rec, view_of_name: dict[str, int], *, refine_intrinsics: bool, rounds: int = 2
 ) -> list[str]:
     """Remove :func:`sibling_outliers` from the pycolmap reconstruction ``rec`` (in place) and bundle-adjust
-    the rest (intrinsics fixed unless ``refine_intrinsics``); repeated up to ``rounds`` times, since a wrong
-    frame can hide a second one. Returns the removed image names."""
+    the rest (intrinsics fixed unless ``refine_intrinsics``; on ``MAPPER_THREADS`` threads, reproducible);
+    repeated up to ``rounds`` times, since a wrong frame can hide a second one. Returns the removed image names."""
     import pycolmap
 
-    from eigs.sfm.colmap import c2w_of
+    from eigs.sfm.colmap import MAPPER_THREADS, c2w_of
 
     removed: list[str] = []
     for _ in range(rounds):
@@ -90,6 +90,7 @@ def reject_sibling_outliers(
         ba.refine_focal_length = refine_intrinsics
         ba.refine_extra_params = refine_intrinsics
         ba.refine_principal_point = False
+        ba.ceres.solver_options.num_threads = MAPPER_THREADS  # default -1: every core, not reproducible
         pycolmap.bundle_adjustment(rec, ba)
         removed += bad
         log.warning("removed %d latent frame(s) registered far from their view's other latents: %s",

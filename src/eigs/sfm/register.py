@@ -15,7 +15,15 @@ from pathlib import Path
 
 import numpy as np
 
-from eigs.sfm.colmap import ColmapOptions, c2w_of, device, extract, pixel_scale, verification_options
+from eigs.sfm.colmap import (
+    ColmapOptions,
+    c2w_of,
+    device,
+    extract,
+    pixel_scale,
+    verification_options,
+    verification_seed,
+)
 
 log = logging.getLogger(__name__)
 
@@ -91,7 +99,7 @@ def register_images(
         reg_db,
         matching_options=m,
         pairing_options=pairing,
-        verification_options=verification_options(px),
+        verification_options=verification_options(px, verification_seed(opts)),
         device=device(opts.device),
     )
 

@@ -202,6 +202,11 @@ def _features(db: Path, ldir: Path, lat: _Latents, cam, opts: ColmapOptions, tim
     with timer("features"):
         name_to_id = cm.extract(db, ldir, lat.names, cam.K, cam.width, cam.height, cam.distortion, db.parent, opts)
     report["feature_scale"] = cm.feature_scale(cam.width, cam.height, opts.feature_scale)
+    report["threads"] = {  # docs/sfm.md, "Reproducibility"
+        "features_and_matching": opts.num_threads,
+        "mapping_and_bundle_adjustment": opts.num_threads if opts.global_mapping else cm.MAPPER_THREADS,
+        "verification_seed": cm.verification_seed(opts),
+    }
     return name_to_id, cm.pixel_scale(opts, cam.width, cam.height)
 
 
@@ -258,6 +263,7 @@ def _given_reconstruction(scene, scene_path, edi, db, ldir, work, lat, name_to_i
                           poses=None):  # fmt: skip
     """Given mode: matches guided by the known poses, then points triangulated with the poses fixed. ``poses``:
     (V, L, 4, 4) latent poses to use instead of the scene's (model mode)."""
+    from eigs.sfm import colmap as cm
     from eigs.sfm.given import guided_match, triangulate
 
     got = _given_poses(scene, edi.timestamps_us, scene_path) if poses is None else poses
@@ -280,7 +286,7 @@ def _given_reconstruction(scene, scene_path, edi, db, ldir, work, lat, name_to_i
             cam.width,
             cam.height,
             cam.distortion,
-            num_threads=cfg.colmap.num_threads,
+            num_threads=cm.MAPPER_THREADS,  # bundle adjustment: reproducible on one thread (colmap.py)
             px=px,
         )
     report["models"] = [len(lat.names)]
