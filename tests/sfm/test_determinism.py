@@ -87,11 +87,13 @@ def test_image_ids_follow_the_image_names(toy_twice):
 
 
 @pytest.mark.slow
-def test_colmap_mode_twice_at_two_threads_is_identical(tmp_path):
+def test_colmap_mode_twice_at_two_threads_agrees(tmp_path):
     """The default suite's mode (features, exhaustive matching, incremental mapping, test-camera registration) on
-    the ray-cast scene (8 views, B = 2: 24 latent images). Identical in 10 of 10 runs; COLMAP's approximate CPU
-    matcher itself changed a few of 7,140 pairs in 3 of 11 passes over `blocks` (docs/sfm.md), so this scene's
-    276 pairs are not guaranteed either, only very likely."""
+    the ray-cast scene (8 views, B = 2: 24 latent images) at 2 threads. Byte identity is not promised there
+    (docs/sfm.md: COLMAP's approximate CPU matcher changed a few of 7,140 pairs of `blocks` in 3 of 11 passes, poses
+    by up to 8e-5), so the runs must agree to 1e-3 in the normalised frame, register the same latents and record
+    the pinned mapping threads: unseeded verification or multi-threaded mapping differed far more (1,410 of 7,140
+    two-view geometries of `blocks`)."""
     d = make_scene(tmp_path, views=8, bins=2)
     outs = []
     for run in (1, 2):
@@ -102,9 +104,8 @@ def test_colmap_mode_twice_at_two_threads_is_identical(tmp_path):
         assert report["threads"]["mapping_and_bundle_adjustment"] == 1
         outs.append(out)
     p1, p2 = (read_poses(o) for o in outs)
-    assert p1.registered.all()
-    assert_same_arrays(p1, p2, ("c2w", "registered", "interpolated", "canonical"))
+    assert p1.registered.all() and np.array_equal(p1.registered, p2.registered)
+    np.testing.assert_allclose(p1.c2w, p2.c2w, atol=1e-3, rtol=0)
     t1, t2 = (read_test_cameras(o) for o in outs)
-    assert_same_arrays(t1, t2, ("c2w", "method", "reprojection_error_px", "num_inliers"))
-    for name in ("poses.h5", "test_cameras.h5", *MODEL_FILES):
-        assert digest(outs[0] / name) == digest(outs[1] / name), name
+    np.testing.assert_array_equal(t1.method, t2.method)
+    np.testing.assert_allclose(t1.c2w, t2.c2w, atol=1e-3, rtol=0)
