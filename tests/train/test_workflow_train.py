@@ -28,8 +28,8 @@ def test_default_suite_trains_each_run_on_each_scene_and_oracle_only_with_ground
     jobs = sorted(train_jobs(out))
     scenes = ["blocks", "chair", "dish", "drums", "spheres", "tree"]
     b4 = ("3dgs", "edi-3dgs", "oracle", "deblurring-gs", "deblurring-gs+", "e2gs", "bad-gaussians", "besplat",
-          "evagaussians", "eigs", "eigs+", "eigs-a", "eigs-b", "eigs-minus", "eigs-w64", "eigs-w128", "eigs-w512",
-          "eigs-d2", "eigs-d4")  # fmt: skip
+          "evagaussians", "eigs", "eigs-literal", "eigs+", "eigs-a", "eigs-b", "eigs-minus", "eigs-w64", "eigs-w128",
+          "eigs-w512", "eigs-d2", "eigs-d4")  # fmt: skip
     want = [f"results/{s}/b4/{r}" for s in scenes for r in b4]
     want += [f"results/{s}/b{b}/eigs-b{b}" for s in scenes for b in (6, 8)]
     assert jobs == sorted(want)
