@@ -34,7 +34,7 @@ from pathlib import Path
 import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from bench.gpu_check import CheckError, copy_h5, sha256, train_config_json  # noqa: E402
+from bench.gpu_check import CheckError, copy_h5, cpu_name, sha256, train_config_json  # noqa: E402
 from bench.schedule import merge_configs  # noqa: E402
 
 FORMAT = "eigs-device-batch"
@@ -174,19 +174,9 @@ def run_batch(bundle: Path, resources: Path, work: Path, workers: int, start_unt
             done.append({"scene": st["scene"], "run": st["run"], "status": "ok", "evaluate_s": round(wall, 1)})
     not_started = [{"scene": j["scene"], "run": j["run"], "status": "not started"} for j in pending]
     report = {"elapsed_s": round(time.monotonic() - t0, 1), "workers": workers, "jobs": done + not_started,
-              "cpu": cpu_name(), "cores": os.cpu_count()}  # fmt: skip
+              "cpu": cpu_name() or "unknown", "cores": os.cpu_count()}  # fmt: skip
     (work / "batch.json").write_text(json.dumps(report, indent=2) + "\n")
     return report
-
-
-def cpu_name() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return "unknown"
 
 
 def kept(p: Path) -> bool:

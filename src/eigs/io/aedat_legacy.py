@@ -215,6 +215,18 @@ def _events31(path: Path, h: Header, width: int, height: int, chunk: int = CHUNK
 
 
 # ---------------------------------------------------------------------------------------------------- AEDAT 2.0
+def _records20(path: Path, h: Header, chunk: int) -> Iterator[np.ndarray]:
+    """The AEDAT 2.0 records from the data start, ``chunk`` at a time: structured arrays of ``a`` (address,
+    big-endian uint32) and ``t`` (timestamp µs, big-endian int32)."""
+    with open(path, "rb") as fh:
+        fh.seek(h.data_start)
+        while True:
+            buf = fh.read(8 * chunk)
+            if not buf:
+                return
+            yield np.frombuffer(buf, dtype=[("a", ">u4"), ("t", ">i4")])
+
+
 def _events20(path: Path, h: Header, width: int, height: int, counts: dict[str, int], chunk: int = CHUNK_EVENTS):
     where = str(path)
     order = TimeOrder(path)
@@ -222,35 +234,29 @@ def _events20(path: Path, h: Header, width: int, height: int, counts: dict[str, 
     size = path.stat().st_size - h.data_start
     if size % 8:
         raise EigsError(path, f"truncated: {size} bytes of records is not a multiple of 8 (cut file)")
-    with open(path, "rb") as fh:
-        fh.seek(h.data_start)
-        while True:
-            buf = fh.read(8 * chunk)
-            if not buf:
-                break
-            rec = np.frombuffer(buf, dtype=[("a", ">u4"), ("t", ">i4")])
-            a = rec["a"]
-            aps = (a >> 31).astype(bool)
-            special = ~aps & ((a >> 10) & 1).astype(bool)
-            imu = (a & IMU_CODE) == IMU_CODE
-            counts["IMU samples"] = counts.get("IMU samples", 0) + int(np.count_nonzero(imu))
-            third = aps & ~imu & (((a >> 10) & 3) == 2)
-            counts["third-cycle APS reads"] = counts.get("third-cycle APS reads", 0) + int(np.count_nonzero(third))
-            counts["special events"] = counts.get("special events", 0) + int(np.count_nonzero(special))
-            dvs = ~aps & ~special
-            a, t32 = a[dvs], rec["t"][dvs]
-            if np.any(t32 < 0):
-                raise EigsError(path, f"negative timestamp near event {offset}: corrupted file")
-            t = t32.astype(np.int64)
-            order(t, offset)
-            xr = ((a >> 12) & 0x3FF).astype(np.int64)
-            yr = ((a >> 22) & 0x1FF).astype(np.int64)
-            x = (width - 1) - to_pixel(xr, width, "x address", where, offset).astype(np.int64)
-            y = (height - 1) - to_pixel(yr, height, "y address", where, offset).astype(np.int64)
-            x, y = x.astype(np.uint16), y.astype(np.uint16)
-            p = np.where((a >> 11) & 1, np.int8(1), np.int8(-1))
-            offset += t.size
-            yield x, y, t, p
+    for rec in _records20(path, h, chunk):
+        a = rec["a"]
+        aps = (a >> 31).astype(bool)
+        special = ~aps & ((a >> 10) & 1).astype(bool)
+        imu = (a & IMU_CODE) == IMU_CODE
+        counts["IMU samples"] = counts.get("IMU samples", 0) + int(np.count_nonzero(imu))
+        third = aps & ~imu & (((a >> 10) & 3) == 2)
+        counts["third-cycle APS reads"] = counts.get("third-cycle APS reads", 0) + int(np.count_nonzero(third))
+        counts["special events"] = counts.get("special events", 0) + int(np.count_nonzero(special))
+        dvs = ~aps & ~special
+        a, t32 = a[dvs], rec["t"][dvs]
+        if np.any(t32 < 0):
+            raise EigsError(path, f"negative timestamp near event {offset}: corrupted file")
+        t = t32.astype(np.int64)
+        order(t, offset)
+        xr = ((a >> 12) & 0x3FF).astype(np.int64)
+        yr = ((a >> 22) & 0x1FF).astype(np.int64)
+        x = (width - 1) - to_pixel(xr, width, "x address", where, offset).astype(np.int64)
+        y = (height - 1) - to_pixel(yr, height, "y address", where, offset).astype(np.int64)
+        x, y = x.astype(np.uint16), y.astype(np.uint16)
+        p = np.where((a >> 11) & 1, np.int8(1), np.int8(-1))
+        offset += t.size
+        yield x, y, t, p
 
 
 @dataclass
@@ -323,44 +329,38 @@ def _scan_aps20(path: Path, h: Header, width: int, height: int, counts: dict[str
             counts["incomplete APS frames"] = counts.get("incomplete APS frames", 0) + 1
         st.phase = -1
 
-    with open(path, "rb") as fh:
-        fh.seek(h.data_start)
-        while True:
-            buf = fh.read(8 * chunk)
-            if not buf:
-                break
-            rec = np.frombuffer(buf, dtype=[("a", ">u4"), ("t", ">i4")])
-            pos, cyc, idx, _, t = _aps_fields(rec, width, height)
-            if pos.size == 0:
-                base += rec.size
-                continue
-            if np.any(t < 0):
-                k = base + int(pos[np.flatnonzero(t < 0)[0]])
-                raise EigsError(path, f"negative timestamp in the APS sample at record {k}: corrupted file")
-            cuts = np.flatnonzero(np.diff(cyc)) + 1
-            for lo, hi in zip(np.r_[0, cuts], np.r_[cuts, pos.size], strict=True):
-                c, run = int(cyc[lo]), idx[lo:hi]
-                if c == 0:
-                    if st.phase == 1:
-                        close(base + int(pos[lo]))
-                    if st.phase == -1:
-                        st.start(base + int(pos[lo]))
-                    seen = st.reset_seen
-                    st.last_reset_t = int(t[hi - 1])
-                else:
-                    if st.phase == -1:  # signal reads of a frame whose resets precede the file (or were lost)
-                        counts["APS reads outside a frame"] = counts.get("APS reads outside a frame", 0) + hi - lo
-                        continue
-                    if st.phase == 0:
-                        st.phase, st.first_signal_t = 1, int(t[lo])
-                    seen = st.signal_seen
-                    st.signals += hi - lo
-                st.bad |= bool(np.any(run < 0))
-                ok = run[run >= 0]
-                seen += np.bincount(ok, minlength=st.n).astype(np.int32)
-                if c == 1 and st.signals >= st.n:
-                    close(base + int(pos[hi - 1]) + 1)
+    for rec in _records20(path, h, chunk):
+        pos, cyc, idx, _, t = _aps_fields(rec, width, height)
+        if pos.size == 0:
             base += rec.size
+            continue
+        if np.any(t < 0):
+            k = base + int(pos[np.flatnonzero(t < 0)[0]])
+            raise EigsError(path, f"negative timestamp in the APS sample at record {k}: corrupted file")
+        cuts = np.flatnonzero(np.diff(cyc)) + 1
+        for lo, hi in zip(np.r_[0, cuts], np.r_[cuts, pos.size], strict=True):
+            c, run = int(cyc[lo]), idx[lo:hi]
+            if c == 0:
+                if st.phase == 1:
+                    close(base + int(pos[lo]))
+                if st.phase == -1:
+                    st.start(base + int(pos[lo]))
+                seen = st.reset_seen
+                st.last_reset_t = int(t[hi - 1])
+            else:
+                if st.phase == -1:  # signal reads of a frame whose resets precede the file (or were lost)
+                    counts["APS reads outside a frame"] = counts.get("APS reads outside a frame", 0) + hi - lo
+                    continue
+                if st.phase == 0:
+                    st.phase, st.first_signal_t = 1, int(t[lo])
+                seen = st.signal_seen
+                st.signals += hi - lo
+            st.bad |= bool(np.any(run < 0))
+            ok = run[run >= 0]
+            seen += np.bincount(ok, minlength=st.n).astype(np.int32)
+            if c == 1 and st.signals >= st.n:
+                close(base + int(pos[hi - 1]) + 1)
+        base += rec.size
     if st.phase != -1:
         counts["incomplete APS frames"] = counts.get("incomplete APS frames", 0) + 1
     return frames
