@@ -5,9 +5,14 @@ machine of docs/benchmarks.md "GPU path" has 16 cores, CUDA PyTorch and no netwo
 cameras, init cloud: what `eigs train` and `eigs evaluate` read) into a folder with a manifest of every job's
 `eigs train --config` JSON (the config files merged as Snakemake merges them).
 
-``run``: the jobs in the given order on ``--workers`` processes, each `eigs train` then `eigs evaluate` on the CPU,
-exactly as rules/train.smk and rules/evaluate.smk call them; no job starts after ``--start-until`` seconds and every
-job still running at ``--deadline`` seconds is stopped (it leaves no output). Each finished job writes its run and
+``--prepare SCENE,...`` leaves the artifacts of those built-in scenes out of the bundle and records their
+configuration instead: the machine makes them (`eigs synth`, `eigs edi`, `eigs sfm`, `eigs init`, exactly as
+rules/synth.smk, edi.smk and sfm.smk call them, one thread each), first, before the jobs that read them.
+
+``run``: the scenes to prepare, then the jobs in the given order, on ``--workers`` processes, each `eigs train` then
+`eigs evaluate` on the CPU, exactly as rules/train.smk and rules/evaluate.smk call them; a stage starts when the
+one it reads has finished; no job starts after ``--start-until`` seconds and every stage still running at
+``--deadline`` seconds is stopped (it leaves no output). Each finished job writes its run and
 evaluation folders under ``WORK/results/<scene>/b<B>/`` and a benchmark file in Snakemake's format (wall seconds and
 CPU seconds of the process and its children, from ``wait4``) under ``WORK/benchmarks/``, so the suite ledger
 (bench/suite_ledger.py ``save``) takes them like a workflow directory's; ``--pack FILE`` writes them (without the
@@ -61,10 +66,39 @@ def parse_jobs(text: str) -> list[tuple[str, str]]:
     return jobs
 
 
-def make_bundle(directory: Path, config: dict, jobs: list[tuple[str, str]], out: Path) -> dict:
+def compact_json(values: dict) -> str:
+    """A config section as rules/common.smk ``config_json`` passes it (sorted keys, no spaces; unquoted here)."""
+    return json.dumps(values, sort_keys=True, separators=(",", ":"))
+
+
+def prepare_spec(config: dict, scene: str, bins: list[int]) -> dict:
+    """What the machine needs to make a built-in scene's artifacts as rules/synth.smk, edi.smk and sfm.smk do: the
+    scene's overrides and the edi (without bins), sfm (global section under the scene's own) and init sections."""
+    spec = (config.get("scenes") or {}).get(scene)
+    if not spec or "builtin" not in spec:
+        raise CheckError(f"--prepare: {scene!r} is not a built-in scene of the config")
+    sfm = {**(config.get("sfm") or {}), **(spec.get("sfm") or {})}
+    if sfm.get("mode", "auto") not in ("auto", "colmap") or sfm.get("allow_given"):
+        raise CheckError(f"--prepare: scene {scene!r}: only COLMAP SfM is prepared on the machine")
+    edi = {k: v for k, v in (config.get("edi") or {}).items() if k != "bins"}
+    return {
+        "builtin": spec["builtin"],
+        "overrides": compact_json(spec.get("overrides") or {}),
+        "bins": sorted(bins),
+        "edi": compact_json(edi),
+        "sfm": compact_json(sfm),
+        "init": compact_json(config.get("init") or {}),
+    }
+
+
+def make_bundle(directory: Path, config: dict, jobs: list[tuple[str, str]], out: Path,
+                prepare: tuple[str, ...] = ()) -> dict:  # fmt: skip
     runs = config.get("runs") or {}
     bins_default = int((config.get("edi") or {}).get("bins", [4])[0])
-    manifest: dict = {"format": FORMAT, "version": 1, "jobs": [], "files": {}}
+    manifest: dict = {"format": FORMAT, "version": 2, "jobs": [], "files": {}, "prepare": {}}
+    for scene in prepare:
+        if scene not in {s for s, _ in jobs}:
+            raise CheckError(f"--prepare: no job trains on {scene!r}")
     tmp = out.with_name(f".{out.name}.tmp")
     if tmp.exists():
         import shutil
@@ -74,7 +108,12 @@ def make_bundle(directory: Path, config: dict, jobs: list[tuple[str, str]], out:
         if run not in runs:
             raise CheckError(f"--jobs: {run!r} is not a run of the config")
         b = int(runs[run].get("bins", bins_default))
-        manifest["jobs"].append({"scene": scene, "run": run, "bins": b, "config": train_config_json(runs[run])})
+        manifest["jobs"].append({"scene": scene, "run": run, "bins": b, "config": train_config_json(runs[run]),
+                                 "prepared": scene in prepare})  # fmt: skip
+        if scene in prepare:
+            bins = sorted({*manifest["prepare"].get(scene, {}).get("bins", []), b})
+            manifest["prepare"][scene] = prepare_spec(config, scene, bins)
+            continue
         src = {f"{scene}/scene.h5": directory / "results" / scene / "scene.h5"}
         for name in ("edi.h5", "sfm/poses.h5", "sfm/test_cameras.h5", "init.ply"):
             src[f"{scene}/b{b}/{name}"] = directory / "results" / scene / f"b{b}" / name
@@ -90,6 +129,7 @@ def make_bundle(directory: Path, config: dict, jobs: list[tuple[str, str]], out:
             else:
                 dst.write_bytes(path.read_bytes())
             manifest["files"][rel] = {"sha256": sha256(dst), "bytes": dst.stat().st_size}
+    tmp.mkdir(parents=True, exist_ok=True)
     (tmp / "MANIFEST.json").write_text(json.dumps(manifest, indent=2) + "\n")
     if out.exists():
         import shutil
@@ -99,12 +139,37 @@ def make_bundle(directory: Path, config: dict, jobs: list[tuple[str, str]], out:
     return manifest
 
 
+def eigs_command() -> list[str]:
+    return [sys.executable, "-m", "eigs.cli"]
+
+
+def prepare_commands(work: Path, scene: str, spec: dict) -> list[tuple[str, str, list[str]]]:
+    """(stage, benchmark name, command) of a prepared scene, in order: synth, then edi, sfm and init per B."""
+    out = work / "results" / scene
+    eigs = eigs_command()
+    cmds = [("synth", scene, [*eigs, "synth", "--scene", spec["builtin"], "--config", spec["overrides"],
+                              "-o", str(out / "scene.h5"), "--contact-sheet", str(out / "contact_sheet.png"),
+                              "--threads", "1"])]  # fmt: skip
+    for b in spec["bins"]:
+        d = out / f"b{b}"
+        cmds += [
+            ("edi", f"{scene}_b{b}", [*eigs, "edi", str(out / "scene.h5"), "-o", str(d / "edi.h5"), "--latent-dir",
+                                      str(d / "latent"), "--bins", str(b), "--config", spec["edi"], "--threads", "1"]),
+            ("sfm", f"{scene}_b{b}", [*eigs, "sfm", str(out / "scene.h5"), str(d / "edi.h5"), "--latent-dir",
+                                      str(d / "latent"), "-o", str(d / "sfm"), "--config", spec["sfm"],
+                                      "--threads", "1"]),
+            ("init", f"{scene}_b{b}", [*eigs, "init", str(d / "sfm"), "-o", str(d / "init.ply"), "--config",
+                                       spec["init"]]),
+        ]  # fmt: skip
+    return cmds
+
+
 def job_commands(bundle: Path, resources: Path, work: Path, job: dict) -> list[list[str]]:
     s, r, b = job["scene"], job["run"], job["bins"]
-    base = bundle / s
+    base = (work / "results" if job.get("prepared") else bundle) / s
     run_dir = work / "results" / s / f"b{b}" / r
     metrics = work / "results" / s / f"b{b}" / "eval" / r / "metrics.json"
-    eigs = [sys.executable, "-m", "eigs.cli"]
+    eigs = eigs_command()
     return [
         [*eigs, "train", str(base / "scene.h5"), str(base / f"b{b}" / "edi.h5"), str(base / f"b{b}" / "sfm"),
          str(base / f"b{b}" / "init.ply"), "-o", str(run_dir), "--config", job["config"], "--device", "cpu",
@@ -116,7 +181,28 @@ def job_commands(bundle: Path, resources: Path, work: Path, job: dict) -> list[l
 
 def benchmark_row(wall: float, cpu: float, max_rss_kb: int) -> str:
     hms = time.strftime("%H:%M:%S", time.gmtime(wall)).lstrip("0").lstrip(":") or "0"
-    return (f"{wall:.2f}\t{hms}\t{max_rss_kb / 1024:.2f}\tNA\tNA\tNA\tNA\tNA\tNA\t{cpu:.2f}\n")
+    return f"{wall:.2f}\t{hms}\t{max_rss_kb / 1024:.2f}\tNA\tNA\tNA\tNA\tNA\tNA\t{cpu:.2f}\n"
+
+
+def batch_tasks(bundle: Path, resources: Path, work: Path, manifest: dict) -> list[dict]:
+    """Every stage to run, in priority order (the scenes to prepare first: the jobs wait for them), each with the
+    index of the task it reads (``after``) and where its benchmark goes."""
+    tasks: list[dict] = []
+    last_of_scene: dict[str, int] = {}
+    for scene, spec in (manifest.get("prepare") or {}).items():
+        prev = None
+        for stage, name, cmd in prepare_commands(work, scene, spec):
+            tasks.append({"scene": scene, "run": None, "stage": stage, "name": name, "cmd": cmd, "after": prev})
+            prev = len(tasks) - 1
+        last_of_scene[scene] = prev
+    for job in manifest["jobs"]:
+        name = f"{job['scene']}_b{job['bins']}_{job['run']}"
+        after = last_of_scene.get(job["scene"]) if job.get("prepared") else None
+        for stage, cmd in zip(("train", "evaluate"), job_commands(bundle, resources, work, job), strict=True):
+            tasks.append({"scene": job["scene"], "run": job["run"], "stage": stage, "name": name, "cmd": cmd,
+                          "after": after})  # fmt: skip
+            after = len(tasks) - 1
+    return tasks
 
 
 def run_batch(bundle: Path, resources: Path, work: Path, workers: int, start_until: float, deadline: float) -> dict:
@@ -124,32 +210,39 @@ def run_batch(bundle: Path, resources: Path, work: Path, workers: int, start_unt
     if manifest.get("format") != FORMAT:
         raise CheckError(f"{bundle}: not a {FORMAT} bundle")
     t0 = time.monotonic()
-    pending = list(manifest["jobs"])
-    running: dict[int, dict] = {}  # pid -> job state
-    done: list[dict] = []
+    tasks = batch_tasks(bundle, resources, work, manifest)
+    state = ["pending"] * len(tasks)  # pending / running / ok / failed / stopped / skipped
+    running: dict[int, tuple[int, float, subprocess.Popen]] = {}  # pid -> (task index, start, process)
     env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONUNBUFFERED="1")
     (work / "logs").mkdir(parents=True, exist_ok=True)
 
-    def start(job: dict, stage: int) -> None:
-        cmd = job_commands(bundle, resources, work, job)[stage]
-        name = f"{job['scene']}_b{job['bins']}_{job['run']}"
-        log = open(work / "logs" / f"{name}_{('train', 'evaluate')[stage]}.log", "w")  # noqa: SIM115
-        p = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env, start_new_session=True)
+    def start(i: int) -> None:
+        t = tasks[i]
+        log = open(work / "logs" / f"{t['name']}_{t['stage']}.log", "w")  # noqa: SIM115
+        p = subprocess.Popen(t["cmd"], stdout=log, stderr=subprocess.STDOUT, env=env, start_new_session=True)
         log.close()
         # the Popen object is kept: one that is garbage-collected while running goes to subprocess's own reaper,
         # which would take its exit status (and its resource usage) before os.wait4 sees it
-        running[p.pid] = {**job, "stage": stage, "t": time.monotonic(), "name": name, "proc": p}
+        running[p.pid] = (i, time.monotonic(), p)
+        state[i] = "running"
 
-    while pending or running:
+    while True:
         now = time.monotonic() - t0
-        while pending and len(running) < workers and now < start_until:
-            start(pending.pop(0), 0)
+        for i, t in enumerate(tasks):  # a stage whose input failed or never came is skipped
+            if state[i] == "pending" and t["after"] is not None and state[t["after"]] in ("failed", "stopped",
+                                                                                           "skipped"):  # fmt: skip
+                state[i] = "skipped"
+        # a task is ready when what it reads is done; a job's first stage waits for --start-until, the rest not
+        ready = [i for i, t in enumerate(tasks) if state[i] == "pending"
+                 and (t["after"] is None or state[t["after"]] == "ok")
+                 and (now < start_until or t["stage"] == "evaluate")]  # fmt: skip
+        for i in ready[: max(0, workers - len(running))]:
+            start(i)
         if now >= deadline:
-            for pid, st in running.items():
+            for pid, (i, _, _) in running.items():
                 os.killpg(pid, signal.SIGKILL)
                 os.waitpid(pid, 0)
-                stage = ("train", "evaluate")[st["stage"]]
-                done.append({"scene": st["scene"], "run": st["run"], "status": f"stopped at the deadline ({stage})"})
+                state[i] = "stopped"
             running.clear()
             break
         if not running:
@@ -158,32 +251,60 @@ def run_batch(bundle: Path, resources: Path, work: Path, workers: int, start_unt
         if pid == 0:
             time.sleep(0.5)
             continue
-        st = running.pop(pid)
-        st["proc"].returncode = os.waitstatus_to_exitcode(status)  # reaped here, not by Popen
-        wall = time.monotonic() - st["t"]
-        stage = ("train", "evaluate")[st["stage"]]
-        bench = work / "benchmarks" / stage / f"{st['name']}.tsv"
-        bench.parent.mkdir(parents=True, exist_ok=True)
-        if os.waitstatus_to_exitcode(status) != 0:
-            done.append({"scene": st["scene"], "run": st["run"], "status": f"{stage} failed"})
+        i, t_start, proc = running.pop(pid)
+        proc.returncode = os.waitstatus_to_exitcode(status)  # reaped here, not by Popen
+        t = tasks[i]
+        if proc.returncode != 0:
+            state[i] = "failed"
             continue
-        bench.write_text(BENCH_HEADER + benchmark_row(wall, ru.ru_utime + ru.ru_stime, ru.ru_maxrss))
-        if st["stage"] == 0:
-            start({k: st[k] for k in ("scene", "run", "bins", "config")}, 1)
-        else:
-            done.append({"scene": st["scene"], "run": st["run"], "status": "ok", "evaluate_s": round(wall, 1)})
-    not_started = [{"scene": j["scene"], "run": j["run"], "status": "not started"} for j in pending]
-    report = {"elapsed_s": round(time.monotonic() - t0, 1), "workers": workers, "jobs": done + not_started,
-              "cpu": cpu_name() or "unknown", "cores": os.cpu_count()}  # fmt: skip
+        state[i] = "ok"
+        bench = work / "benchmarks" / t["stage"] / f"{t['name']}.tsv"
+        bench.parent.mkdir(parents=True, exist_ok=True)
+        bench.write_text(BENCH_HEADER + benchmark_row(time.monotonic() - t_start, ru.ru_utime + ru.ru_stime,
+                                                      ru.ru_maxrss))  # fmt: skip
+    report = {"elapsed_s": round(time.monotonic() - t0, 1), "workers": workers, "jobs": job_report(tasks, state),
+              "prepared": prepare_report(tasks, state), "cpu": cpu_name() or "unknown",
+              "cores": os.cpu_count()}  # fmt: skip
     (work / "batch.json").write_text(json.dumps(report, indent=2) + "\n")
     return report
 
 
+def job_report(tasks: list[dict], state: list[str]) -> list[dict]:
+    """Per job (train + evaluate): ok, or which stage failed, was stopped, skipped or never started."""
+    out = []
+    for i, t in enumerate(tasks):
+        if t["stage"] != "train":
+            continue
+        tr, ev = state[i], state[i + 1]
+        if tr == "ok" and ev == "ok":
+            status = "ok"
+        elif tr == "pending":
+            status = "not started"
+        elif tr == "skipped":
+            status = "skipped: its scene was not prepared"
+        elif tr in ("failed", "stopped"):
+            status = "train failed" if tr == "failed" else "stopped at the deadline (train)"
+        else:
+            status = {"failed": "evaluate failed", "stopped": "stopped at the deadline (evaluate)"}.get(ev, ev)
+        out.append({"scene": t["scene"], "run": t["run"], "status": status})
+    return out
+
+
+def prepare_report(tasks: list[dict], state: list[str]) -> dict[str, str]:
+    """Per prepared scene: ok, or its first stage that did not finish and how."""
+    out: dict[str, str] = {}
+    for i, t in enumerate(tasks):
+        if t["run"] is None and out.get(t["scene"], "ok") == "ok":
+            out[t["scene"]] = "ok" if state[i] == "ok" else f"{t['stage']} {state[i]}"
+    return out
+
+
 def kept(p: Path) -> bool:
-    """Whether ``pack`` keeps a file: no model and no motion file (evaluation scored it into metrics.json); of the
+    """Whether ``pack`` keeps a file: no model and no motion file (evaluation scored it into metrics.json), none of a
+    prepared scene's HDF5 files and latent frames (its logs, SfM report and contact sheet stay); of the
     renders only the first blur view and its ground truth (the view the qualitative grid shows,
     eigs.tables.figures.grid_view)."""
-    if p.suffix in (".ply", ".npz"):
+    if p.suffix in (".ply", ".npz", ".h5") or "latent" in p.parts:
         return False
     if "renders" in p.parts:
         i = p.parts.index("renders")
@@ -210,6 +331,7 @@ def main(argv: list[str] | None = None) -> int:
     b.add_argument("--config", type=Path, nargs="+", required=True)
     b.add_argument("--jobs", required=True, help="scene:run,scene:run,... in the order they should run")
     b.add_argument("-o", "--out", type=Path, required=True)
+    b.add_argument("--prepare", default="", help="built-in scenes the machine makes itself (scene,scene,...)")
     r = sub.add_parser("run")
     r.add_argument("--bundle", type=Path, required=True)
     r.add_argument("--resources", type=Path, required=True, help="folder with lpips/ (eigs evaluate --resources)")
@@ -221,7 +343,8 @@ def main(argv: list[str] | None = None) -> int:
     a = ap.parse_args(argv)
     try:
         if a.cmd == "bundle":
-            m = make_bundle(a.directory, merged_config(a.config), parse_jobs(a.jobs), a.out)
+            prepare = tuple(x.strip() for x in a.prepare.split(",") if x.strip())
+            m = make_bundle(a.directory, merged_config(a.config), parse_jobs(a.jobs), a.out, prepare)
             print(f"{a.out}: {len(m['jobs'])} jobs, {sum(f['bytes'] for f in m['files'].values()) / 2**20:.1f} MiB")
         else:
             if a.workers < 1:

@@ -82,3 +82,46 @@ def test_pack_keeps_the_small_outputs_and_one_grid_view(tmp_path):
         names = sorted(tar.getnames())
     assert names == ["results/s/b4/eval/r/metrics.json", "results/s/b4/eval/r/renders/blur/0003.png",
                      "results/s/b4/eval/r/renders/gt_blur/0003.png", "results/s/b4/r/config.json"]  # fmt: skip
+
+
+def test_prepared_scenes_are_made_first_and_their_jobs_read_them(tmp_path, monkeypatch):
+    config = {"scenes": {"c": {"builtin": "chair", "overrides": {"shake": 2.5}}, "d": {"builtin": "dish"}},
+              "edi": {"bins": [4], "threshold": "auto"}, "sfm": {"allow_given": False}, "init": {"max_points": 9},
+              "runs": {"r": {"method": "eigs", "options": {"steps": 5}}}}  # fmt: skip
+    m = db.make_bundle(tmp_path, config, [("c", "r"), ("d", "r")], tmp_path / "bundle", prepare=("c", "d"))
+    assert m["files"] == {}  # nothing local is read for a prepared scene
+    spec = m["prepare"]["c"]
+    assert spec == {"builtin": "chair", "overrides": '{"shake":2.5}', "bins": [4], "edi": '{"threshold":"auto"}',
+                    "sfm": '{"allow_given":false}', "init": '{"max_points":9}'}  # fmt: skip
+    with pytest.raises(CheckError, match="no job"):
+        db.make_bundle(tmp_path, config, [("c", "r")], tmp_path / "b2", prepare=("d",))
+    with pytest.raises(CheckError, match="COLMAP"):
+        db.prepare_spec({**config, "sfm": {"allow_given": True}}, "c", [4])
+
+    work = tmp_path / "work"
+    cmds = {t["stage"]: t["cmd"] for t in db.batch_tasks(tmp_path / "bundle", tmp_path, work, m) if t["scene"] == "c"}
+    assert cmds["synth"][-6:] == ["-o", str(work / "results/c/scene.h5"), "--contact-sheet",
+                                  str(work / "results/c/contact_sheet.png"), "--threads", "1"]  # fmt: skip
+    assert str(work / "results/c/b4/init.ply") in cmds["train"]  # the job reads the prepared scene
+
+    # the scheduler: scene d's synth fails, so its edi, sfm, init and job are skipped; scene c's chain runs in order
+    order = tmp_path / "order.txt"
+
+    def prepare(_work, scene, _spec):
+        stages = ("synth", "edi", "sfm", "init")
+        code = "raise SystemExit(1)" if scene == "d" else ""
+        return [(st, scene, _script(f"open({str(order)!r}, 'a').write('{scene}:{st}\\n'); " + (code if st == "synth"
+                                    else ""))) for st in stages]  # fmt: skip
+
+    def commands(_bundle, _res, _work, job):
+        return [_script(f"open({str(order)!r}, 'a').write('{job['scene']}:train\\n')"), _script("")]
+
+    monkeypatch.setattr(db, "prepare_commands", prepare)
+    monkeypatch.setattr(db, "job_commands", commands)
+    rep = db.run_batch(tmp_path / "bundle", tmp_path, work, workers=4, start_until=60, deadline=60)
+    assert [x for x in order.read_text().split() if x.startswith("c:")] == ["c:synth", "c:edi", "c:sfm", "c:init",
+                                                                              "c:train"]  # fmt: skip
+    assert "d:edi" not in order.read_text() and "d:train" not in order.read_text()
+    assert rep["prepared"] == {"c": "ok", "d": "synth failed"}
+    assert {j["scene"]: j["status"] for j in rep["jobs"]} == {"c": "ok", "d": "skipped: its scene was not prepared"}
+    assert (work / "benchmarks" / "sfm" / "c.tsv").is_file()
