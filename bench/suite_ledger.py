@@ -280,6 +280,19 @@ def _machine() -> str:
     return machine()
 
 
+def batch_machine(directory: Path) -> str | None:
+    """The machine a bench/device_batch.py run measured on, from its ``batch.json`` in ``directory`` (None without
+    one): the jobs of such a directory ran elsewhere, not on the machine that saves them."""
+    path = directory / "batch.json"
+    if not path.is_file():
+        return None
+    try:
+        rep = json.loads(path.read_text())
+        return f"{rep['cpu']}, {int(rep['cores'])} cores, device_batch: {int(rep['workers'])} one-thread jobs at a time"
+    except (ValueError, KeyError, TypeError) as err:
+        raise LedgerError(f"{path}: not a device_batch report ({err})") from None
+
+
 def save(
     directory: Path,
     cfg: dict,
@@ -331,7 +344,7 @@ def save(
         todo.append((job, wall, cpu))
     if not todo:
         return [], skipped
-    machine = _machine() if machine is None else machine
+    machine = (batch_machine(directory) or _machine()) if machine is None else machine
     commit = commit if commit is not None else repo_commit()
     rows = read_jobs_csv(ledger)
     saved: list[str] = []

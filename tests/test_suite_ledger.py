@@ -414,3 +414,14 @@ def test_job_time_prefers_a_training_runs_own_cpu_seconds(tmp_path):
     assert schedule.job_time(tmp_path, "train/my_scene_b6_eigs+", 1) == (300.0, 250.0)
     (run / "config.json").write_text("{trunc")
     assert schedule.job_time(tmp_path, "train/my_scene_b6_eigs+", 1) == (300.0, 250.0)
+
+
+def test_a_device_batch_directory_names_the_machine_it_ran_on(tmp_path):
+    from bench.suite_ledger import LedgerError, batch_machine
+
+    assert batch_machine(tmp_path) is None  # a workflow directory of this machine
+    (tmp_path / "batch.json").write_text('{"cpu": "Intel(R) Xeon(R) Processor", "cores": 16, "workers": 14}')
+    assert batch_machine(tmp_path) == "Intel(R) Xeon(R) Processor, 16 cores, device_batch: 14 one-thread jobs at a time"
+    (tmp_path / "batch.json").write_text('{"cpu": "x"}')
+    with pytest.raises(LedgerError, match="batch.json"):
+        batch_machine(tmp_path)
