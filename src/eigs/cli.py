@@ -20,7 +20,8 @@ from eigs.util.memory import keep_freed_memory
 
 # subcommand name -> module path (in pipeline order). A subcommand is named for what it does and lives in the
 # package of its stage: ingest -> io (readers of outside formats), edi -> events, init -> sfm (it reads the SfM
-# model), resources -> metrics (the model files the metrics need), render -> train (it renders a run folder).
+# model), resources -> metrics (the model files the metrics need), render -> train (it renders a run folder);
+# status -> util (it reads the logs every stage writes, beside the progress bars of eigs.util.progress).
 COMMANDS: dict[str, str] = {
     "scene": "eigs.scene.cli",
     "synth": "eigs.synth.cli",
@@ -37,6 +38,7 @@ COMMANDS: dict[str, str] = {
     "figures": "eigs.tables.figures_cli",
     "metric": "eigs.metrics.cli",
     "resources": "eigs.metrics.resources_cli",
+    "status": "eigs.util.status_cli",
 }
 
 

@@ -16,7 +16,8 @@ def progress(iterable: Iterable[T], desc: str, total: int | None = None, unit: s
     """Wrap ``iterable`` in a progress bar on stderr.
 
     Bars are disabled when ``EIGS_PROGRESS=0``; under a non-interactive stderr (Snakemake logs) they
-    still print, but at most every 5 s so log files stay small.
+    still print, but at most every 5 s so log files stay small; ``eigs status`` reads them back from the logs
+    (eigs.util.status; docs/development.md, "Progress while Snakemake runs").
     """
     disable = os.environ.get("EIGS_PROGRESS", "1") == "0"
     interactive = sys.stderr.isatty()
