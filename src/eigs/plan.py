@@ -1,0 +1,243 @@
+"""Run planning: which jobs a workflow config makes, in one place and without torch.
+
+Plain functions over the config dict (the merged `--configfile` documents): the scenes and how each is made
+(built-in, ingested), its EDI rule (`events: false` scenes: `edi_frames`), its SfM rule (COLMAP, given poses, an
+existing model), the runs trained on it, each run's B and model file, and :func:`jobs`, every job of the `all`
+target by rule and wildcards. rules/common.smk and bench/schedule.py (with it bench/suite_ledger.py) read these,
+so the workflow and the schedule simulation cannot disagree. Per-method facts come through :func:`needs_events`,
+:func:`needs_ground_truth` and :func:`is_field_method`.
+
+Orders are the workflow's: scene lists sorted, a run's `scenes:` list in its own order.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from eigs.events.options import DEFAULT_BINS
+from eigs.sfm.options import SfmConfig
+from eigs.train.field_config import FIELD_METHODS
+from eigs.train.method_inputs import EVENT_METHODS
+
+Config = Mapping[str, Any]
+
+# Methods that train on the scene's ground truth, so only on scenes that have it.
+GROUND_TRUTH_METHODS = frozenset({"oracle"})
+
+
+# --- per-method facts -----------------------------------------------------------------------------------------
+def needs_events(method: str) -> bool:
+    """Whether ``method`` reads the scene's events (not scheduled on `events: false` scenes)."""
+    return method in EVENT_METHODS
+
+
+def needs_ground_truth(method: str) -> bool:
+    """Whether ``method`` trains on the ground truth (scheduled only on scenes that have it)."""
+    return method in GROUND_TRUTH_METHODS
+
+
+def is_field_method(method: str) -> bool:
+    """Whether ``method`` is a radiance-field method (model.npz, rule train_field) rather than Gaussian."""
+    return method in FIELD_METHODS
+
+
+# --- scenes ---------------------------------------------------------------------------------------------------
+def all_scenes(config: Config) -> list[str]:
+    return sorted(config["scenes"])
+
+
+def builtin_scenes(config: Config) -> list[str]:
+    """Scenes made by `eigs synth` (rule synth)."""
+    return sorted(n for n, s in config["scenes"].items() if "builtin" in s)
+
+
+def ingested_scenes(config: Config) -> list[str]:
+    """Scenes read from a `source:` (rule ingest)."""
+    return sorted(n for n, s in config["scenes"].items() if "source" in s)
+
+
+def simulated_scenes(config: Config) -> list[str]:
+    """Built-in scenes written as an E²NeRF real layout first (rule synth_e2nerf_real), then ingested."""
+    return sorted(n for n, s in config["scenes"].items() if "simulate" in s)
+
+
+def scene_uses_events(config: Config, scene: str) -> bool:
+    """False for a scene configured with `events: false`: its edi_frames job passes the frames through (`eigs edi
+    --no-events`) and no method that needs events trains on it."""
+    return config["scenes"][scene].get("events", True) is not False
+
+
+def event_scenes(config: Config) -> list[str]:
+    """Scenes of rule edi."""
+    return [s for s in all_scenes(config) if scene_uses_events(config, s)]
+
+
+def frames_only_scenes(config: Config) -> list[str]:
+    """Scenes of rule edi_frames."""
+    return [s for s in all_scenes(config) if not scene_uses_events(config, s)]
+
+
+def scene_has_ground_truth(config: Config, scene: str) -> bool:
+    """Built-in and E²NeRF synthetic scenes, and simulated recordings ingested with `--groundtruth`."""
+    s = config["scenes"][scene]
+    merged = "simulate" in s and "--groundtruth" in s.get("options", [])  # rules/synth.smk synth_e2nerf_real
+    return "builtin" in s or s.get("format") == "e2nerf-synthetic" or merged
+
+
+def edi_bins(config: Config) -> list[int]:
+    """The configured bin counts (`edi: bins:`, default [eigs.events.options.DEFAULT_BINS])."""
+    return [int(b) for b in config.get("edi", {}).get("bins", [DEFAULT_BINS])]
+
+
+# --- sfm ------------------------------------------------------------------------------------------------------
+def scene_sfm(config: Config, scene: str) -> dict[str, Any]:
+    """The `sfm:` keys of a scene: the global section with the scene's own `sfm:` over it; `{scene}` in `path` is
+    the scene name. Mode model without a path is a config error naming the scene."""
+    values = {**config.get("sfm", {}), **config["scenes"][scene].get("sfm", {})}
+    if "path" in values:
+        values["path"] = values["path"].replace("{scene}", scene)
+    if values.get("mode") == "model" and not values.get("path"):
+        raise ValueError(f"config: scene {scene}: sfm mode model needs `path` (the COLMAP model directory)")
+    return values
+
+
+def sfm_rule(config: Config, scene: str) -> str:
+    """The scene's SfM rule: `sfm_model` (`mode: model`), `sfm_given` (a built-in scene with `mode: given`, or `auto`
+    with `allow_given`; defaults: eigs.sfm.options.SfmConfig) or `sfm` (COLMAP; ingested scenes keep it and auto mode
+    decides from the file, eigs.sfm.run.resolve_mode)."""
+    section = scene_sfm(config, scene)
+    default = SfmConfig()
+    mode = section.get("mode", default.mode)
+    if mode == "model":
+        return "sfm_model"
+    builtin = "builtin" in config["scenes"][scene]
+    if builtin and (mode == "given" or (mode == "auto" and section.get("allow_given", default.allow_given))):
+        return "sfm_given"
+    return "sfm"
+
+
+def sfm_scenes(config: Config, rule: str) -> list[str]:
+    """The scenes whose SfM job is ``rule`` (sfm, sfm_given or sfm_model)."""
+    return [s for s in all_scenes(config) if sfm_rule(config, s) == rule]
+
+
+# --- runs -----------------------------------------------------------------------------------------------------
+def runs(config: Config) -> dict[str, Any]:
+    return config.get("runs", {})
+
+
+def run_bins(config: Config, run: str) -> int:
+    """B of a run (its `bins:`, else the first configured EDI bins)."""
+    return int(runs(config)[run].get("bins", edi_bins(config)[0]))
+
+
+def run_scenes(config: Config, run: str) -> list[str]:
+    """Scenes a run is trained on: its `scenes:` list, else every scene (methods that train on ground truth only on
+    scenes that have it; methods that need events only on scenes that have them). A `scenes:` list naming an `events:
+    false` scene for a method that needs events is a ValueError."""
+    spec = runs(config)[run]
+    method = spec["method"]
+    if "scenes" in spec:
+        scenes = [s for s in spec["scenes"] if s in config["scenes"]]
+        frames_only = [s for s in scenes if not scene_uses_events(config, s)]
+        if needs_events(method) and frames_only:
+            raise ValueError(
+                f"config: run {run} (method {method}, which needs events) lists scene(s) "
+                f"{', '.join(frames_only)} configured with `events: false`; remove them from its `scenes:` or use a "
+                "method that trains on the frames alone"
+            )
+        return scenes
+    if needs_ground_truth(method):
+        return [s for s in all_scenes(config) if scene_has_ground_truth(config, s)]
+    if needs_events(method):
+        return event_scenes(config)
+    return all_scenes(config)
+
+
+def run_model_file(config: Config, run: str) -> str:
+    """The model file of a run folder: model.npz for a radiance-field method (docs/training.md), else model.ply."""
+    return "model.npz" if is_field_method(runs(config)[run]["method"]) else "model.ply"
+
+
+def gaussian_runs(config: Config) -> list[str]:
+    """Runs of rule train."""
+    return sorted(r for r in runs(config) if run_model_file(config, r) == "model.ply")
+
+
+def field_runs(config: Config) -> list[str]:
+    """Runs of rule train_field."""
+    return sorted(r for r in runs(config) if run_model_file(config, r) == "model.npz")
+
+
+def check(config: Config) -> None:
+    """Raise the config errors of the scenes' SfM sections and the runs' scene lists now, not when a rule asks."""
+    for scene in all_scenes(config):
+        sfm_rule(config, scene)
+    for run in runs(config):
+        run_scenes(config, run)
+
+
+# --- jobs -----------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Job:
+    """One job of the `all` target: its rule and wildcards (empty where the rule has none)."""
+
+    rule: str
+    scene: str = ""
+    bins: int | None = None
+    run: str = ""
+
+    def __str__(self) -> str:
+        """As a dry run names it: ``train scene=chair bins=4 run=eigs``."""
+        wildcards = [("scene", self.scene), ("bins", self.bins), ("run", self.run)]
+        return " ".join([self.rule, *(f"{k}={v}" for k, v in wildcards if v not in ("", None))])
+
+
+def train_jobs(config: Config) -> list[Job]:
+    """The training jobs (rule train or train_field), runs sorted, each over its scenes; rule evaluate has one job
+    per training job, with the same wildcards."""
+    out = []
+    for run in sorted(runs(config)):
+        rule = "train_field" if is_field_method(runs(config)[run]["method"]) else "train"
+        out += [Job(rule, scene, run_bins(config, run), run) for scene in run_scenes(config, run)]
+    return out
+
+
+def video_runs(config: Config) -> list[str]:
+    """The runs an orbit video shows, in order: `video: runs:` (each must be a `runs:` entry), else the runs of
+    Table I's rows eigs.view.video.VideoOptions.table1_rows."""
+    from eigs.tables.rows import table_rows
+    from eigs.view.video import VideoOptions
+
+    given = config.get("video", {}).get("runs")
+    if given is not None:
+        unknown = [r for r in given if r not in runs(config)]
+        if unknown:
+            raise ValueError(f"config: video: runs {', '.join(unknown)} are not in `runs:`")
+        return list(dict.fromkeys(given))
+    table1 = table_rows(config.get("tables"))["table1"]
+    return list(dict.fromkeys(table1[k] for k in VideoOptions().table1_rows if table1.get(k) in runs(config)))
+
+
+def video_scenes(config: Config) -> list[str]:
+    """Scenes with an orbit video: every scene a video run is trained on."""
+    return sorted({s for r in video_runs(config) for s in run_scenes(config, r)})
+
+
+def jobs(config: Config) -> list[Job]:
+    """Every job of the `all` target (what `snakemake -n all` schedules in an empty directory), grouped by stage."""
+    scenes = all_scenes(config)
+    bins = edi_bins(config)
+    out = [Job("resources")]
+    out += [Job("synth", s) for s in builtin_scenes(config)]
+    out += [Job("synth_e2nerf_real", s) for s in simulated_scenes(config)]
+    out += [Job("ingest", s) for s in ingested_scenes(config)]
+    for s in scenes:
+        edi = "edi" if scene_uses_events(config, s) else "edi_frames"
+        out += [Job(rule, s, b) for b in bins for rule in (edi, sfm_rule(config, s), "init")]
+    training = train_jobs(config)
+    out += training + [Job("evaluate", j.scene, j.bins, j.run) for j in training]
+    out += [Job("video", s) for s in video_scenes(config)]
+    return [*out, Job("tables"), Job("figures")]

@@ -1,0 +1,74 @@
+"""eigs.plan, the run planning the workflow and bench/schedule.py share: its job list against Snakemake's dry runs (a
+committed snapshot of every shipped config, taken before the planning moved there, and a live dry run of the toy
+config), and the per-method facts."""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from bench.schedule import merge_configs
+from eigs import plan
+
+REPO = Path(__file__).resolve().parents[1]
+SNAPSHOT = json.loads((REPO / "tests" / "data" / "plan_jobs.json").read_text())
+CONFIGS = sorted(k for k in SNAPSHOT if k != "about")
+
+
+def load(files: list[str]) -> dict:
+    return merge_configs([yaml.safe_load((REPO / f).read_text()) for f in files])
+
+
+def dry_run_jobs(stdout: str) -> list[str]:
+    """The jobs of a dry run's output as ``rule k=v ...`` (rule all left out), sorted."""
+    out = []
+    for block in re.split(r"\n\[\w{3} \w{3} [^\]]*\]\n", stdout)[1:]:
+        rule = re.search(r"^(?:local)?rule (\w+):$", block, re.M).group(1)
+        wildcards = re.search(r"^\s+wildcards: (.*)$", block, re.M)
+        if rule != "all":
+            out.append(" ".join([rule, *(wildcards.group(1).split(", ") if wildcards else [])]))
+    return sorted(out)
+
+
+@pytest.mark.parametrize("name", CONFIGS)
+def test_jobs_match_the_dry_run_snapshot(name):
+    expected = SNAPSHOT[name]["jobs"]
+    got = [str(j) for j in plan.jobs(load(SNAPSHOT[name]["configfiles"]))]
+    assert len(got) == len(set(got))
+    assert sorted(got) == expected
+
+
+def test_jobs_match_a_live_dry_run(tmp_path):
+    """The toy config's jobs as Snakemake plans them now, in an empty directory."""
+    cmd = [sys.executable, "-m", "snakemake", "all", "-n", "--cores", "1", "-s", str(REPO / "workflow" / "Snakefile"),
+           "--directory", str(tmp_path), f"--configfile={REPO / 'config' / 'toy.yaml'}"]  # fmt: skip
+    proc = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, check=False, timeout=300)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    assert dry_run_jobs(proc.stdout) == sorted(str(j) for j in plan.jobs(load(["config/toy.yaml"])))
+
+
+def test_method_facts():
+    assert plan.needs_ground_truth("oracle") and not plan.needs_ground_truth("3dgs")
+    assert plan.needs_events("eigs") and not plan.needs_events("3dgs")
+    assert plan.is_field_method("nerf") and not plan.is_field_method("eigs")
+
+
+def test_run_scenes_follow_what_a_scene_has():
+    cfg = {
+        "scenes": {"toy": {"builtin": "toy"}, "mine": {"source": "x", "format": "txt", "events": False}},
+        "runs": {"oracle": {"method": "oracle"}, "eigs": {"method": "eigs"}, "3dgs": {"method": "3dgs", "bins": 6},
+                 "bad": {"method": "eigs", "scenes": ["mine"]}},
+    }  # fmt: skip
+    assert plan.run_scenes(cfg, "oracle") == ["toy"]
+    assert plan.run_scenes(cfg, "eigs") == ["toy"]
+    assert plan.run_scenes(cfg, "3dgs") == ["mine", "toy"]
+    assert (plan.run_bins(cfg, "3dgs"), plan.run_bins(cfg, "eigs")) == (6, 4)
+    assert [plan.sfm_rule(cfg, s) for s in ("mine", "toy")] == ["sfm", "sfm_given"]
+    with pytest.raises(ValueError, match="run bad .* needs events"):
+        plan.check(cfg)
