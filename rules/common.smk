@@ -1,4 +1,5 @@
-# Shared helpers: config validation, scene lists, wildcard constraints, stage targets.
+# Shared helpers: config validation, scene lists, wildcard constraints, stage targets. Run planning (which scenes, SfM
+# rule, runs per scene, B, model file) is eigs.plan's, shared with bench/schedule.py; this file binds it to `config`.
 # Stage options: every default lives in the stage's options dataclass (eigs.events.options.EdiOptions,
 # eigs.sfm.options.SfmConfig / InitOptions, eigs.synth.scenes.DEFAULTS, eigs.train.config.TrainConfig); the schema
 # only types and bounds them, and a rule passes its config section unchanged as one JSON object (`--config`).
@@ -8,17 +9,14 @@ import shlex
 
 from snakemake.utils import validate
 
-from eigs.events.options import DEFAULT_BINS
-from eigs.sfm.options import SfmConfig
-from eigs.train.field_config import FIELD_METHODS
-from eigs.train.method_inputs import EVENT_METHODS
+from eigs import plan
 
 
 validate(config, schema="../workflow/schemas/config.schema.yaml")
 
 SCENES = config["scenes"]
-BUILTIN_SCENES = sorted(n for n, s in SCENES.items() if "builtin" in s)
-INGESTED_SCENES = sorted(n for n, s in SCENES.items() if "source" in s)
+BUILTIN_SCENES = plan.builtin_scenes(config)
+INGESTED_SCENES = plan.ingested_scenes(config)
 # Targets each stage adds to `all` (rules/<stage>.smk extend this list).
 STAGE_TARGETS = []
 
@@ -65,39 +63,19 @@ def ingest_options(wildcards):
 
 
 # --- sfm / init (rules/sfm.smk) -------------------------------------------------------------------------------
-ALL_SCENES = sorted(SCENES)
+ALL_SCENES = plan.all_scenes(config)
 
 
 def scene_sfm(scene):
-    """The `sfm:` keys of a scene: the global section with the scene's own `sfm:` over it; `{scene}` in `path` is
-    the scene name. Mode model without a path is a config error naming the scene."""
-    values = {**config.get("sfm", {}), **SCENES[scene].get("sfm", {})}
-    if "path" in values:
-        values["path"] = values["path"].replace("{scene}", scene)
-    if values.get("mode") == "model" and not values.get("path"):
-        raise ValueError(f"config: scene {scene}: sfm mode model needs `path` (the COLMAP model directory)")
-    return values
+    """The `sfm:` keys of a scene (eigs.plan.scene_sfm)."""
+    return plan.scene_sfm(config, scene)
 
 
-def sfm_given_scenes():
-    """Built-in scenes whose SfM job uses their ground-truth poses instead of COLMAP (the sfm_given jobs); `sfm: mode:
-    given`, or `auto` with `allow_given` (defaults: eigs.sfm.options.SfmConfig). A built-in scene stores
-    ground-truth latent poses, so `eigs sfm` in auto mode would pick given poses anyway (eigs.sfm.run.resolve_mode);
-    their own rule shows the skipped COLMAP mapping in a dry run. Ingested scenes keep the sfm jobs (auto
-    mode decides from the file)."""
-    default = SfmConfig()
-    out = []
-    for s in BUILTIN_SCENES:
-        section = scene_sfm(s)
-        mode = section.get("mode", default.mode)
-        if mode == "given" or (mode == "auto" and section.get("allow_given", default.allow_given)):
-            out.append(s)
-    return out
-
-
-SFM_MODEL_SCENES = [s for s in ALL_SCENES if scene_sfm(s).get("mode") == "model"]  # rule sfm_model
-SFM_GIVEN_SCENES = sfm_given_scenes()
-SFM_COLMAP_SCENES = [s for s in ALL_SCENES if s not in SFM_GIVEN_SCENES and s not in SFM_MODEL_SCENES]
+# Each scene's SfM job (eigs.plan.sfm_rule) reads an existing COLMAP model, uses the ground-truth poses of a built-in
+# scene (a job of its own, so a dry run shows the skipped COLMAP mapping), or runs COLMAP.
+SFM_MODEL_SCENES = plan.sfm_scenes(config, "sfm_model")  # rule sfm_model
+SFM_GIVEN_SCENES = plan.sfm_scenes(config, "sfm_given")  # rule sfm_given
+SFM_COLMAP_SCENES = plan.sfm_scenes(config, "sfm")  # rule sfm
 
 
 def sfm_config(wildcards):
@@ -116,19 +94,13 @@ def init_config(wildcards):
 
 
 # --- edi (rules/edi.smk) --------------------------------------------------------------------------------------
-def scene_uses_events(scene):
-    """False for a scene configured with `events: false` (a frames-only recording, or no events wanted): its
-    edi_frames job passes the frames through (`eigs edi --no-events`) and no method that needs events trains on it."""
-    return SCENES[scene].get("events", True) is not False
-
-
-EVENT_SCENES = [s for s in ALL_SCENES if scene_uses_events(s)]  # rule edi
-FRAMES_ONLY_SCENES = [s for s in ALL_SCENES if not scene_uses_events(s)]  # rule edi_frames
+EVENT_SCENES = plan.event_scenes(config)  # rule edi
+FRAMES_ONLY_SCENES = plan.frames_only_scenes(config)  # rule edi_frames
 
 
 def edi_bins():
-    """The configured bin counts (config `edi: bins:`, default [eigs.events.options.DEFAULT_BINS])."""
-    return [int(b) for b in config.get("edi", {}).get("bins", [DEFAULT_BINS])]
+    """The configured bin counts (eigs.plan.edi_bins)."""
+    return plan.edi_bins(config)
 
 
 def edi_config(wildcards):
@@ -142,48 +114,23 @@ RUNS = config.get("runs", {})
 
 
 def run_bins(run):
-    """B of a run (its `bins:`, else the first configured EDI bins)."""
-    return int(RUNS[run].get("bins", edi_bins()[0]))
-
-
-def scene_has_ground_truth(scene):
-    s = SCENES[scene]
-    merged = "simulate" in s and "--groundtruth" in s.get("options", [])  # rules/synth.smk synth_e2nerf_real
-    return "builtin" in s or s.get("format") == "e2nerf-synthetic" or merged
+    """B of a run (eigs.plan.run_bins)."""
+    return plan.run_bins(config, run)
 
 
 def run_scenes(run):
-    """Scenes a run is trained on: its `scenes:` list, else every scene (methods that train on ground truth,
-    such as `oracle`, only on scenes that have it; methods that need events, eigs.train.method_inputs.EVENT_METHODS,
-    only on scenes that have them). A `scenes:` list naming an `events: false` scene for such a method is an error."""
-    spec = RUNS[run]
-    method = spec["method"]
-    if "scenes" in spec:
-        scenes = [s for s in spec["scenes"] if s in SCENES]
-        frames_only = [s for s in scenes if not scene_uses_events(s)]
-        if method in EVENT_METHODS and frames_only:
-            raise ValueError(
-                f"config: run {run} (method {method}, which needs events) lists scene(s) "
-                f"{', '.join(frames_only)} configured with `events: false`; remove them from its `scenes:` or use a "
-                "method that trains on the frames alone"
-            )
-        return scenes
-    if method == "oracle":
-        return [s for s in ALL_SCENES if scene_has_ground_truth(s)]
-    if method in EVENT_METHODS:
-        return EVENT_SCENES
-    return ALL_SCENES
+    """Scenes a run is trained on (eigs.plan.run_scenes)."""
+    return plan.run_scenes(config, run)
 
 
 def run_model_file(run):
-    """The model file of a run folder: model.npz for a radiance-field method (docs/training.md), else model.ply."""
-    return "model.npz" if RUNS[run]["method"] in FIELD_METHODS else "model.ply"
+    """The model file of a run folder, model.ply or model.npz (eigs.plan.run_model_file)."""
+    return plan.run_model_file(config, run)
 
 
-for _run in RUNS:  # config errors of the runs' scene lists now, not when a rule first asks
-    run_scenes(_run)
-GAUSSIAN_RUNS = sorted(r for r in RUNS if run_model_file(r) == "model.ply")
-FIELD_RUNS = sorted(r for r in RUNS if run_model_file(r) == "model.npz")
+plan.check(config)  # config errors of the scenes' SfM sections and the runs' scene lists now, not when a rule asks
+GAUSSIAN_RUNS = plan.gaussian_runs(config)
+FIELD_RUNS = plan.field_runs(config)
 
 
 def run_model(wildcards):
@@ -192,11 +139,7 @@ def run_model(wildcards):
 
 
 def train_targets():
-    return [
-        f"results/{scene}/b{run_bins(run)}/{run}/{run_model_file(run)}"
-        for run in sorted(RUNS)
-        for scene in run_scenes(run)
-    ]
+    return [f"results/{j.scene}/b{j.bins}/{j.run}/{run_model_file(j.run)}" for j in plan.train_jobs(config)]
 
 
 def train_config_json(wildcards):

@@ -46,5 +46,5 @@ def bench_facts():
         "sfm_given": len(SFM_GIVEN_SCENES),
         "frames_only": len(FRAMES_ONLY_SCENES),
         "table_runs": {r: {**run_facts(r), "rows": named.count(r)} for r in sorted(set(named))},
-        "event_runs": {r: run_facts(r) for r in sorted(RUNS) if RUNS[r]["method"] in EVENT_METHODS},
+        "event_runs": {r: run_facts(r) for r in sorted(RUNS) if plan.needs_events(RUNS[r]["method"])},
     })  # fmt: skip

@@ -1,17 +1,9 @@
-# Helpers of rules/video.smk (the orbit videos); needs rules/common.smk and rules/common_tables.smk (TABLE_ROWS).
-from eigs.view.video import VideoOptions
+# Helpers of rules/video.smk (the orbit videos); needs rules/common.smk. Which runs and scenes: eigs.plan.
 
 
 def video_runs():
-    """The runs a video shows, in order: `video: runs:` (each must be a `runs:` entry), else the default rows'."""
-    given = config.get("video", {}).get("runs")
-    if given is not None:
-        unknown = [r for r in given if r not in RUNS]
-        if unknown:
-            raise ValueError(f"config: video: runs {', '.join(unknown)} are not in `runs:`")
-        return list(dict.fromkeys(given))
-    table1 = TABLE_ROWS["table1"]
-    return list(dict.fromkeys(table1[k] for k in VideoOptions().table1_rows if table1.get(k) in RUNS))
+    """The runs a video shows, in order: `video: runs:`, else the default rows' (eigs.plan.video_runs)."""
+    return plan.video_runs(config)
 
 
 def video_scene_runs(scene):
@@ -19,7 +11,7 @@ def video_scene_runs(scene):
     return [r for r in video_runs() if scene in run_scenes(r)]
 
 
-VIDEO_SCENES = sorted({s for r in video_runs() for s in run_scenes(r)})
+VIDEO_SCENES = plan.video_scenes(config)
 
 
 def video_inputs(wildcards):

@@ -35,7 +35,7 @@ STAGE_TARGETS.extend(rules.all_synth.input)
 # A built-in scene written as a user's recording: the E²NeRF real (LLFF) layout, with its ground truth beside it
 # (docs/synthetic.md, "E²NeRF real layout"). The scene's `source:` (results/<scene>/e2nerf-real) is read back by
 # the ingest rule like any E²NeRF real scene; `--groundtruth results/<scene>/groundtruth.h5` merges the truth.
-SIMULATED_SCENES = sorted(n for n, s in SCENES.items() if "simulate" in s)
+SIMULATED_SCENES = plan.simulated_scenes(config)
 for _name in SIMULATED_SCENES:
     if SCENES[_name].get("source") != f"results/{_name}/e2nerf-real" or SCENES[_name].get("format") != "e2nerf-real":
         raise ValueError(f"scene {_name}: a simulate: scene needs source results/{_name}/e2nerf-real, format e2nerf-real")
