@@ -1,7 +1,7 @@
 """Simulate the workflow's schedule on N cores from per-job times: how long `snakemake --cores N all` takes when the
 jobs are independent except for their inputs (synth → edi (edi_frames on `events: false` scenes) → sfm → init per
-scene and B; train → evaluate per run, not for methods that need events on `events: false` scenes;
-tables and figures last). Jobs take their rule's threads (config `threads`; init, resources, evaluate, tables and
+scene and B; train → evaluate per run on the scenes eigs.plan gives it, the workflow's own run planning; tables and
+figures last). Jobs take their rule's threads (config `threads`; init, resources, evaluate, tables and
 figures 1), a job starts as soon as its inputs exist and enough cores are free, longest remaining path first.
 
 Per-job seconds come from a finished run's Snakemake benchmark files (``DIR/benchmarks/<rule>/<name>.tsv``: the
@@ -26,7 +26,7 @@ from pathlib import Path
 
 import yaml
 
-from eigs.train.method_inputs import EVENT_METHODS
+from eigs import plan
 
 
 def merge_configs(docs: list[dict]) -> dict:
@@ -45,33 +45,26 @@ def merge_configs(docs: list[dict]) -> dict:
 
 
 def jobs_of(cfg: dict) -> dict[str, tuple[str, list[str], int]]:
-    """Job id → (benchmark name, dependencies, threads) for the `all` target of ``cfg``."""
+    """Job id → (benchmark name, dependencies, threads) for the `all` target of ``cfg``, scenes and runs in the
+    config's order (which scenes, B and runs: eigs.plan, as rules/common.smk plans them)."""
     threads = int(cfg.get("threads", 2))
-    bins_default = int(cfg.get("edi", {}).get("bins", [4])[0])
     scenes = cfg["scenes"]
-    runs = cfg.get("runs", {})
     jobs: dict[str, tuple[str, list[str], int]] = {"resources": ("resources", [], 1)}
     for s, spec in scenes.items():
         builtin = "builtin" in spec
         jobs[f"scene:{s}"] = (f"synth/{s}" if builtin else f"ingest/{s}", [], threads if builtin else 1)
-        for b in cfg.get("edi", {}).get("bins", [4]):
-            if spec.get("events", True) is False:  # rules/edi.smk edi_frames: the frames passed through, 1 thread
-                jobs[f"edi:{s}:{b}"] = (f"edi_frames/{s}_b{b}", [f"scene:{s}"], 1)
-            else:
+        for b in plan.edi_bins(cfg):
+            if plan.scene_uses_events(cfg, s):
                 jobs[f"edi:{s}:{b}"] = (f"edi/{s}_b{b}", [f"scene:{s}"], threads)
+            else:  # rules/edi.smk edi_frames: the frames passed through, 1 thread
+                jobs[f"edi:{s}:{b}"] = (f"edi_frames/{s}_b{b}", [f"scene:{s}"], 1)
             jobs[f"sfm:{s}:{b}"] = (f"sfm/{s}_b{b}", [f"edi:{s}:{b}"], threads)
             jobs[f"init:{s}:{b}"] = (f"init/{s}_b{b}", [f"sfm:{s}:{b}"], 1)
     evals = []
-    for r, spec in runs.items():
-        b = int(spec.get("bins", bins_default))
-        gt_only = spec["method"] == "oracle"
-        for s, sspec in scenes.items():
-            if spec.get("scenes") and s not in spec["scenes"]:
-                continue
-            if gt_only and not ("builtin" in sspec or sspec.get("format") == "e2nerf-synthetic"):
-                continue
-            if spec["method"] in EVENT_METHODS and sspec.get("events", True) is False:  # not scheduled there
-                continue
+    for r in plan.runs(cfg):
+        b = plan.run_bins(cfg, r)
+        trained = set(plan.run_scenes(cfg, r))
+        for s in (s for s in scenes if s in trained):
             jobs[f"train:{s}:{r}"] = (f"train/{s}_b{b}_{r}", [f"init:{s}:{b}"], threads)
             jobs[f"evaluate:{s}:{r}"] = (f"evaluate/{s}_b{b}_{r}", [f"train:{s}:{r}", "resources"], 1)
             evals.append(f"evaluate:{s}:{r}")
@@ -83,19 +76,11 @@ def jobs_of(cfg: dict) -> dict[str, tuple[str, list[str], int]]:
 
 
 def video_trainings(cfg: dict, jobs: dict) -> dict[str, list[str]]:
-    """Scene → the training jobs its orbit video renders (rules/common_video.smk: `video: runs:`, else the runs of
-    Table I's rows eigs.view.video.VideoOptions.table1_rows)."""
-    from eigs.tables.rows import table_rows
-    from eigs.view.video import VideoOptions
-
-    runs = cfg.get("runs", {})
-    shown = (cfg.get("video") or {}).get("runs")
-    if shown is None:
-        table1 = table_rows(cfg.get("tables"))["table1"]
-        shown = [table1[k] for k in VideoOptions().table1_rows if table1.get(k) in runs]
+    """Scene → the training jobs its orbit video renders (eigs.plan.video_runs), in the config's scene order."""
+    shown = plan.video_runs(cfg)
     out: dict[str, list[str]] = {}
     for s in cfg["scenes"]:
-        deps = [f"train:{s}:{r}" for r in dict.fromkeys(shown) if f"train:{s}:{r}" in jobs]
+        deps = [f"train:{s}:{r}" for r in shown if f"train:{s}:{r}" in jobs]
         if deps:
             out[s] = deps
     return out

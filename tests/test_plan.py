@@ -1,6 +1,6 @@
 """eigs.plan, the run planning the workflow and bench/schedule.py share: its job list against Snakemake's dry runs (a
 committed snapshot of every shipped config, taken before the planning moved there, and a live dry run of the toy
-config), and the per-method facts."""
+config), bench/schedule.py's DAG against it, and the per-method facts."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from bench.schedule import merge_configs
+from bench.schedule import jobs_of, merge_configs
 from eigs import plan
 
 REPO = Path(__file__).resolve().parents[1]
@@ -51,6 +51,22 @@ def test_jobs_match_a_live_dry_run(tmp_path):
     proc = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, check=False, timeout=300)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     assert dry_run_jobs(proc.stdout) == sorted(str(j) for j in plan.jobs(load(["config/toy.yaml"])))
+
+
+@pytest.mark.parametrize("name", CONFIGS)
+def test_schedule_simulates_the_planned_jobs(name):
+    """bench/schedule.py's DAG has the planned training, evaluation and video jobs, and one job per scene and per
+    upstream stage, scene and B (a simulated scene's two preparation jobs count as one there)."""
+    cfg = load(SNAPSHOT[name]["configfiles"])
+    planned = plan.jobs(cfg)
+    dag = jobs_of(cfg)
+    for rule in ("train", "evaluate"):
+        want = {(j.scene, j.run) for j in planned if j.rule in (rule, rule + "_field")}
+        assert {tuple(k.split(":")[1:]) for k in dag if k.startswith(rule + ":")} == want
+    assert {k.split(":")[1] for k in dag if k.startswith("video:")} == {j.scene for j in planned if j.rule == "video"}
+    n_scenes, n_bins = len(cfg["scenes"]), len(plan.edi_bins(cfg))
+    counts = {stage: sum(k.startswith(stage + ":") for k in dag) for stage in ("scene", "edi", "sfm", "init")}
+    assert counts == {"scene": n_scenes, "edi": n_scenes * n_bins, "sfm": n_scenes * n_bins, "init": n_scenes * n_bins}
 
 
 def test_method_facts():
