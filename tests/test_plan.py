@@ -88,3 +88,9 @@ def test_run_scenes_follow_what_a_scene_has():
     assert [plan.sfm_rule(cfg, s) for s in ("mine", "toy")] == ["sfm", "sfm_given"]
     with pytest.raises(ValueError, match="run bad .* needs events"):
         plan.check(cfg)
+
+
+def test_planning_needs_no_torch():
+    code = ("import sys, yaml; from eigs import plan; plan.jobs(yaml.safe_load(open('config/config.yaml'))); "
+            "assert 'torch' not in sys.modules")  # fmt: skip
+    subprocess.run([sys.executable, "-c", code], cwd=REPO, check=True, timeout=120)
