@@ -2,12 +2,12 @@
 
 Phases: choose the mode → features → matching → mapping (COLMAP mode) or fixed-pose triangulation (given
 mode) → registration check → canonical frame → fill unregistered latents within their view → accuracy
-against ground truth → test cameras → write. See docs/sfm.md.
+against ground truth (accuracy.py) → test cameras (testcams.py) → write (report.json and report.png: report.py).
+See docs/sfm.md.
 """
 
 from __future__ import annotations
 
-import json
 import logging
 import os
 import shutil
@@ -18,9 +18,13 @@ from pathlib import Path
 import numpy as np
 
 from eigs.errors import EigsError
+from eigs.sfm.accuracy import ground_truth_accuracy
 from eigs.sfm.options import MODES, ColmapOptions, SfmConfig
+from eigs.sfm.report import write_report
+from eigs.sfm.testcams import place_test_cameras
 
 log = logging.getLogger(__name__)
+
 
 class _Timer:
     def __init__(self) -> None:
@@ -136,23 +140,25 @@ def run_sfm(
         db = work / "database.db"
         name_to_id, px = _features(db, ldir, lat, scene.camera, cfg.colmap, timer, report)
         if mode == "given":
-            rec, rejected = _given_reconstruction(scene, scene_path, edi, db, ldir, work, lat, name_to_id, px, cfg,
-                                                  timer, report)
+            rec, rejected = _given_reconstruction(
+                scene, scene_path, edi, db, ldir, work, lat, name_to_id, px, cfg, timer, report
+            )
         else:
             rec, rejected = _colmap_reconstruction(db, ldir, work, lat, px, cfg, timer, report)
         raw, registered = _registration(rec, lat, edi.sharp, rejected, mode, cfg, out_dir, report)
         canon, c2w = _canonical_frame(rec, raw, registered, report)
         c2w, interpolated = _fill_unregistered(c2w, registered, edi.timestamps_us, cfg, report)
         _drop_points(rec, lat, report)
-        gt, est_to_gt = _ground_truth_accuracy(scene, edi, c2w, registered, report)
+        gt, est_to_gt = ground_truth_accuracy(scene, edi, c2w, registered, report)
         tc = None
         if scene.sharp is not None and len(scene.sharp.t_us):
             with timer("test cameras"):
-                tc, report["test_cameras"] = _test_cameras(
+                tc, report["test_cameras"] = place_test_cameras(
                     scene, rec, db, work, mode, canon, est_to_gt, cfg, cfg.colmap
                 )
-        _write_outputs(tmp, rec, scene, edi, c2w, registered, interpolated, mode, canon, tc, gt, est_to_gt, cfg,
-                       timer, report)
+        _write_outputs(
+            tmp, rec, scene, edi, c2w, registered, interpolated, mode, canon, tc, gt, est_to_gt, cfg, timer, report
+        )
         if cfg.keep_work:
             log.info("work files kept in %s", out_dir / "work")
         else:
@@ -245,13 +251,14 @@ def _run_model(scene, edi, lat, latent_dir, edi_path, out_dir, cfg, timer, repor
         if "points" not in report:
             report["points"] = {"count": int(rec.num_points3D()), "removed_single_view": 0,
                                 "mean_reprojection_error_px": float(rec.compute_mean_reprojection_error())}  # fmt: skip
-        gt, est_to_gt = _ground_truth_accuracy(scene, edi, c2w, registered, report)
+        gt, est_to_gt = ground_truth_accuracy(scene, edi, c2w, registered, report)
         tc = None
         if scene.sharp is not None and len(scene.sharp.t_us):
             with timer("test cameras"):
                 no_reg = replace(cfg, register_test_cameras=False)
-                tc, report["test_cameras"] = _test_cameras(scene, rec, None, work, "model", canon, est_to_gt, no_reg,
-                                                           cfg.colmap)  # fmt: skip
+                tc, report["test_cameras"] = place_test_cameras(
+                    scene, rec, None, work, "model", canon, est_to_gt, no_reg, cfg.colmap
+                )
         _write_outputs(tmp, rec, scene, edi, c2w, registered, interpolated, "model", canon, tc, gt, est_to_gt, cfg,
                        timer, report)  # fmt: skip
         shutil.rmtree(work, ignore_errors=True)
@@ -304,9 +311,7 @@ def _colmap_reconstruction(db, ldir, work, lat, px, cfg, timer, report):
         report["matcher"] = cm.match(db, len(lat.names), lat.per_view, opts, px=px)
     with timer("mapping"):
         res = cm.map_images(db, ldir, work / "map", opts, px=px)
-        if res.reconstruction is not None and report["matcher"] == "sequential" and res.model_sizes[0] < len(
-            lat.names
-        ):
+        if res.reconstruction is not None and report["matcher"] == "sequential" and res.model_sizes[0] < len(lat.names):
             res = _spatial_pass(db, ldir, work, res, lat.slots, lat.names, lat.per_view, opts, px)
         if res.lost_to_other_models and report["matcher"] == "sequential" and opts.matcher == "auto":
             kept = _exhaustive_pass(db, ldir, work, res, len(lat.names), lat.per_view, opts, px)
@@ -415,46 +420,9 @@ def _drop_points(rec, lat: _Latents, report: dict) -> None:
     }
 
 
-MIN_MATCHED = 3  # latents with ground truth needed for the Sim(3) alignment
-
-
-def _ground_truth_accuracy(scene, edi, c2w, registered, report):
-    """Accuracy of the estimated latent poses against the scene's ground truth, when it has some:
-    (ground truth (poses, description) or None, Sim(3) canonical estimate → ground truth or None)."""
-    from eigs.scene.truth import latent_poses_at
-
-    gt = latent_poses_at(scene, edi.timestamps_us)
-    if gt is None:
-        return None, None
-    estimated = registered.copy()
-    estimated[np.asarray(edi.sharp, bool), 1:] = False  # copied slots of sharp views are no estimates
-    estimated &= np.all(np.isfinite(gt[0]), axis=(-2, -1))  # latents with ground truth
-    n_matched = int(np.count_nonzero(estimated))
-    if n_matched < MIN_MATCHED:
-        what = "no registered latent pose has" if n_matched == 0 else f"only {n_matched} registered latent poses have"
-        note = (
-            f"{what} ground truth at its time ({MIN_MATCHED} needed for a Sim(3)): the latent times (EDI "
-            "timestamps_us, from the frames' exposure windows or timestamps) lie outside the ground truth, or the "
-            "frames have no times"
-        )
-        log.warning("accuracy not computed: %s", note)
-        report["accuracy"] = {"n": n_matched, "ate_rmse": None, "note": note, "ground_truth": gt[1]}
-        return None, None
-    est_to_gt, report["accuracy"] = _accuracy(c2w, estimated, gt[0], edi.sharp)
-    report["accuracy"]["ground_truth"] = gt[1]
-    a = report["accuracy"]
-    log.info(
-        "accuracy: ATE %.4g (%.3f %% of extent %.4g), rotation error median %.3f°",
-        a["ate_rmse"],
-        a["ate_percent_of_extent"],
-        a["extent"],
-        a["rotation_error_deg_median"],
-    )
-    return gt, est_to_gt
-
-
-def _write_outputs(tmp, rec, scene, edi, c2w, registered, interpolated, mode, canon, tc, gt, est_to_gt, cfg, timer,
-                   report) -> None:
+def _write_outputs(
+    tmp, rec, scene, edi, c2w, registered, interpolated, mode, canon, tc, gt, est_to_gt, cfg, timer, report
+) -> None:
     """The COLMAP model, ``poses.h5``, ``test_cameras.h5``, ``report.png`` and ``report.json`` into ``tmp``."""
     from eigs.artifacts.poses import LatentPoses, write_poses, write_test_cameras
 
@@ -478,12 +446,7 @@ def _write_outputs(tmp, rec, scene, edi, c2w, registered, interpolated, mode, ca
     if tc is not None:
         write_test_cameras(tc, tmp / "test_cameras.h5")
     report["timings_s"] = timer.times
-    if cfg.plot:
-        try:
-            _plot(tmp / "report.png", c2w, registered, gt[0] if gt is not None else None, est_to_gt, report)
-        except Exception as err:  # a plot never fails the stage
-            log.warning("plot failed: %s", err)
-    (tmp / "report.json").write_text(json.dumps(_jsonable(report), indent=2) + "\n")
+    write_report(tmp, report, c2w, registered, gt[0] if gt is not None else None, est_to_gt, cfg.plot)
 
 
 def _drop_single_view_points(rec, view_of_name: dict[str, int]) -> int:
@@ -552,180 +515,3 @@ def _exhaustive_pass(db, ldir, work, res, n_images, L, opts, px):
     if res2.reconstruction is not None and res2.model_sizes[0] > res.model_sizes[0]:
         return res2
     return res
-
-
-def _accuracy(c2w, registered, gt, sharp) -> tuple:
-    """Sim(3) of registered latents onto ground truth, ATE, rotation errors, relative latent errors."""
-    from eigs.sfm.align import extent, latent_relative_errors, motion_ratio_per_view, trajectory_accuracy
-
-    g = gt.reshape(-1, 4, 4)
-    ext = extent(g[np.all(np.isfinite(g), axis=(1, 2))][:, :3, 3])
-    acc = trajectory_accuracy(c2w[registered], gt[registered], gt_extent=ext)
-    out = acc.summary()
-
-    def eye_if_nan(a):
-        return np.where(np.all(np.isfinite(a), axis=(-2, -1))[..., None, None], a, np.eye(4))
-
-    rel = latent_relative_errors(eye_if_nan(c2w), eye_if_nan(gt), acc.sim.scale, valid=registered)
-    moving = ~np.asarray(sharp, bool)
-    tr = motion_ratio_per_view(rel["t_err"][moving], rel["t_motion"][moving], 1e-6 * max(ext, 1e-12))
-    rr = motion_ratio_per_view(rel["r_err_deg"][moving], rel["r_motion_deg"][moving], 1e-4)
-
-    def med(a):
-        a = np.asarray(a, float)
-        a = a[np.isfinite(a)]
-        return float(np.median(a)) if a.size else float("nan")
-
-    out["relative_latent"] = {
-        "definition": "per view: median over k>=1 of the error of T0^-1 Tk against ground truth, divided by the "
-        "view's true intra-exposure motion (largest true |T0^-1 Tk|); then the median over views",
-        "views_compared": int(np.isfinite(tr).sum()),
-        "translation_ratio_median": med(tr),
-        "rotation_ratio_median": med(rr),
-        "translation_ratio_per_view": [None if not np.isfinite(x) else float(x) for x in tr],
-        "rotation_ratio_per_view": [None if not np.isfinite(x) else float(x) for x in rr],
-        "translation_error_median": med(rel["t_err"][moving][:, 1:]),
-        "rotation_error_deg_median": med(rel["r_err_deg"][moving][:, 1:]),
-        "true_translation_motion_median": med(rel["t_motion"][moving].max(axis=1)) if moving.any() else None,
-        "true_rotation_motion_deg_median": med(rel["r_motion_deg"][moving].max(axis=1)) if moving.any() else None,
-    }
-    return acc.sim, out
-
-
-def _test_cameras(scene, rec, db, work, mode, canon, est_to_gt, cfg, opts):
-    """Cameras of every ground-truth sharp image in the model (canonical) frame."""
-    from eigs.artifacts.poses import METHOD_FALLBACK, METHOD_GIVEN, METHOD_REGISTERED, METHODS, TestCameras
-    from eigs.sfm.align import trajectory_accuracy, umeyama
-
-    sh = scene.sharp
-    cam = scene.camera
-    S = len(sh.t_us)
-    method = np.full(S, METHOD_FALLBACK, np.uint8)
-    err = np.full(S, np.nan)
-    n_in = np.zeros(S, np.int64)
-    # ground truth → model frame: (canonical est → gt)⁻¹ in COLMAP mode, the canonical transform in given mode
-    gt_to_model = canon if mode == "given" else (None if est_to_gt is None else est_to_gt.inverse())
-    guesses = gt_to_model.apply_c2w(sh.c2w) if gt_to_model is not None else np.full((S, 4, 4), np.nan)
-    c2w = guesses.copy()
-    summary: dict = {"count": S}
-    if mode == "given":
-        method[:] = METHOD_GIVEN
-    elif cfg.register_test_cameras:
-        from eigs.util.image import write_png
-
-        tdir = work / "test"
-        tdir.mkdir()
-        tnames = [f"test_{i:04d}.png" for i in range(S)]
-        for i, n in enumerate(tnames):
-            write_png(tdir / n, sh.images[i])
-        from eigs.sfm.register import register_images
-
-        regs = register_images(
-            rec, db, tdir, tnames, cam.K, cam.width, cam.height, cam.distortion, list(guesses), work, opts
-        )
-        for i, r in enumerate(regs):
-            n_in[i] = r.num_inliers
-            err[i] = r.reproj_px
-            if r.c2w is not None:
-                c2w[i] = r.c2w
-                method[i] = METHOD_REGISTERED
-        ok = method == METHOD_REGISTERED
-        if gt_to_model is None and ok.sum() >= 3:  # no latent ground truth: align with the registered ones
-            gt_to_model = umeyama(sh.c2w[ok][:, :3, 3], c2w[ok][:, :3, 3])
-            c2w[~ok] = gt_to_model.apply_c2w(sh.c2w[~ok])
-        if ok.any():
-            fin = err[ok]
-            summary["reprojection_error_px_median"] = float(np.median(fin))
-            summary["reprojection_error_px_max"] = float(np.max(fin))
-            summary["inliers_median"] = float(np.median(n_in[ok]))
-        if gt_to_model is not None and ok.sum() >= 1:
-            ref = gt_to_model.apply_c2w(sh.c2w[ok])
-            acc = trajectory_accuracy(c2w[ok], ref) if ok.sum() >= 3 else None
-            d = np.linalg.norm(c2w[ok][:, :3, 3] - ref[:, :3, 3], axis=1)
-            summary["registered_vs_mapped_ground_truth"] = {
-                "centre_distance_median_canonical": float(np.median(d)),
-                "rotation_deg_median": float(np.median(acc.rotation_errors_deg)) if acc else None,
-            }
-    if gt_to_model is None and np.any(method == METHOD_FALLBACK):
-        raise EigsError(
-            None,
-            f"{int(np.sum(method == METHOD_FALLBACK))} test camera(s) could not be registered and there is no "
-            "ground truth to place them (no latent ground-truth poses, fewer than 3 registered test images)",
-        )
-    summary.update({v: int(np.sum(method == k)) for k, v in METHODS.items()})
-    log.info(
-        "test cameras: %s",
-        ", ".join(f"{summary[v]} {v}" for v in METHODS.values() if summary[v]),
-    )
-    tc = TestCameras(
-        c2w=c2w,
-        K=np.tile(np.asarray(cam.K, np.float64), (S, 1, 1)),
-        width=cam.width,
-        height=cam.height,
-        index=np.arange(S, dtype=np.int64),
-        kind=np.asarray(sh.kind, np.uint8),
-        view=np.asarray(sh.view, np.int64),
-        t_us=np.asarray(sh.t_us, np.int64),
-        method=method,
-        reprojection_error_px=err,
-        num_inliers=n_in,
-    )
-    return tc, summary
-
-
-def _plot(path: Path, c2w, registered, gt, est_to_gt, report: dict) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    est = c2w.reshape(-1, 4, 4)
-    ok = np.all(np.isfinite(est), axis=(1, 2))
-    reg = registered.reshape(-1)
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.5))
-    ax = axes[0]
-    if gt is not None and est_to_gt is not None:
-        canon_gt = est_to_gt.inverse().apply_c2w(gt.reshape(-1, 4, 4))
-        g = canon_gt[:, :3, 3]
-        ax.plot(g[:, 0], g[:, 1], ".", color="0.6", ms=4, label="ground truth (aligned)")
-    e = est[ok][:, :3, 3]
-    ax.plot(e[reg[ok], 0], e[reg[ok], 1], "b.", ms=4, label="registered")
-    if (ok & ~reg).any():
-        ax.plot(est[ok & ~reg][:, 0, 3], est[ok & ~reg][:, 1, 3], "rx", ms=5, label="interpolated")
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.set_title(f"camera centres (canonical x–y), mode {report['mode']}")
-    ax.legend(fontsize=8)
-    ax = axes[1]
-    rel = report.get("accuracy", {}).get("relative_latent")
-    if rel:
-        t = [np.nan if x is None else x for x in rel["translation_ratio_per_view"]]
-        r = [np.nan if x is None else x for x in rel["rotation_ratio_per_view"]]
-        x = np.arange(len(t))
-        ax.bar(x - 0.2, t, 0.4, label="translation")
-        ax.bar(x + 0.2, r, 0.4, label="rotation")
-        ax.axhline(0.25, color="k", lw=0.8, ls="--")
-        ax.set_xlabel("moving view")
-        ax.set_ylabel("relative-pose error / true intra-exposure motion")
-        ax.legend(fontsize=8)
-        a = report["accuracy"]
-        ax.set_title(
-            f"ATE {a['ate_percent_of_extent']:.3f} % of extent; rot. median {a['rotation_error_deg_median']:.3f}°"
-        )
-    else:
-        ax.axis("off")
-        ax.text(0.5, 0.5, "no ground truth", ha="center", va="center")
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-
-
-def _jsonable(x):
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.generic):
-        return x.item()
-    if isinstance(x, float) and not np.isfinite(x):
-        return None
-    return x
