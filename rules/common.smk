@@ -10,9 +10,13 @@ import shlex
 from snakemake.utils import validate
 
 from eigs import plan
+from eigs.train.resolve import check_runs
 
 
 validate(config, schema="../workflow/schemas/config.schema.yaml")
+# every `runs:` entry as its train job will resolve it (method, training and method options: eigs.train.resolve),
+# so a typo fails the dry run at once, on one line naming the run, the key and the accepted keys
+check_runs(config.get("runs"))
 
 SCENES = config["scenes"]
 BUILTIN_SCENES = plan.builtin_scenes(config)

@@ -79,3 +79,19 @@ def test_builtin_and_ingested_scenes_do_not_clash(tmp_path):
     proc = snakemake("all", "-n", "--forceall", "--cores", "1", f"--configfile={cfg}")
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "AmbiguousRuleException" not in proc.stderr
+
+
+@pytest.mark.parametrize(
+    ("options", "key", "accepted"),
+    [({"method_options": {"lamda_event": 1}}, "lamda_event", "accepted: ade, shape,"),
+     ({"stepz": 5}, "stepz", "accepted: method, steps,")],
+)  # fmt: skip
+def test_a_typo_in_a_run_option_fails_the_dry_run_on_one_line(tmp_path, options, key, accepted):
+    """Every `runs:` entry is checked while the DAG is planned (eigs.train.resolve.check_runs, rules/common.smk)."""
+    cfg = tmp_path / "typo.yaml"
+    cfg.write_text(yaml.safe_dump({"scenes": {"toy": {"builtin": "toy"}},
+                                   "runs": {"my-eigs": {"method": "eigs", "options": options}}}))  # fmt: skip
+    proc = snakemake("all", "-n", "--cores", "1", f"--configfile={cfg}")
+    assert proc.returncode != 0
+    lines = [line for line in (proc.stdout + proc.stderr).splitlines() if key in line]
+    assert any("run my-eigs" in line and accepted in line for line in lines), proc.stdout + proc.stderr

@@ -1,7 +1,7 @@
 """What a scene does not need is not scheduled (issue 20), checked on dry runs of small configs: ground-truth poses
 skip COLMAP (an `sfm_given` job instead of `sfm`); a scene configured with `events: false` gets an `edi_frames` job
 (`eigs edi --no-events`) instead of `edi` and no training or evaluation job of a method that needs events
-(eigs.train.method_inputs.EVENT_METHODS); upstream artifacts are one job per scene and B whatever the number of runs;
+(`needs_events` in eigs.train.catalog); upstream artifacts are one job per scene and B whatever the number of runs;
 a run several tables use trains once; a config change that does not touch a stage does not rerun it (Snakemake's
 params trigger, on outputs marked up to date with `--touch`).
 
@@ -21,7 +21,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from eigs.train.method_inputs import EVENT_METHODS
+from eigs.train.catalog import event_methods
 
 REPO = Path(__file__).resolve().parents[1]
 SNAKEFILE = REPO / "workflow" / "Snakefile"
@@ -88,7 +88,7 @@ def test_scene_without_events_schedules_edi_frames_and_no_event_method(tmp_path)
     """Two scenes, one with `events: false`, at B = 4 and 6: per B one `edi` job (the evented scene) and one
     `edi_frames` job running `eigs edi --no-events` (the other); every method that needs events trains and is
     evaluated on the evented scene only, every other method on both; SfM and init stay one job per scene and B."""
-    runs = {m: {"method": m, "options": {"steps": 10}} for m in (*sorted(EVENT_METHODS), *FRAMES_METHODS)}
+    runs = {m: {"method": m, "options": {"steps": 10}} for m in (*sorted(event_methods()), *FRAMES_METHODS)}
     cfg = {"scenes": {"ev": {"builtin": "toy"}, "frames": {"builtin": "toy", "events": False}}, "threads": 1,
            "edi": {"bins": [4, 6]}, "runs": runs}  # fmt: skip
     proc = snakemake(tmp_path, cfg, "all", "-n", "-p", "--forceall")

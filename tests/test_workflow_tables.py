@@ -17,7 +17,7 @@ import pytest
 import yaml
 
 from eigs.tables.rows import OPTIONAL_TABLES, table_rows
-from eigs.train.methods import method_names
+from eigs.train.catalog import method_names
 from tests.conftest import SHARED_REAL, require
 
 REPO = Path(__file__).resolve().parents[1]
@@ -32,8 +32,6 @@ def snakemake(*args: str, cwd: Path = REPO, timeout: int = 600) -> subprocess.Co
 def job_counts(out: str) -> dict[str, int]:
     block = out.split("Job stats:")[1].split("total")[0]
     return {m.group(1): int(m.group(2)) for m in re.finditer(r"^(\w+)\s+(\d+)$", block, re.M)}
-
-
 
 
 @pytest.mark.parametrize("path", CONFIGS, ids=lambda p: p.name)
@@ -137,6 +135,8 @@ def test_toy_dag_end_to_end_produces_the_tables(tmp_path):
     assert rows["eigs"]["source"] == "results/toy/b4/eigs" and rows["eigs"]["psnr_paper"] == "28.21"
     doc = json.loads((tmp_path / "results/toy/b4/eval/eigs/metrics.json").read_text())
     assert float(rows["eigs"]["psnr"]) == pytest.approx(doc["metrics"]["novel"]["psnr"], abs=1e-12)
-    print(f"toy Table I novel PSNR: eigs {float(rows['eigs']['psnr']):.2f}, 3dgs {float(rows['3dgs']['psnr']):.2f}, "
-          f"edi-3dgs {float(rows['edi-3dgs']['psnr']):.2f}, oracle {float(rows['oracle']['psnr']):.2f}")
+    print(
+        f"toy Table I novel PSNR: eigs {float(rows['eigs']['psnr']):.2f}, 3dgs {float(rows['3dgs']['psnr']):.2f}, "
+        f"edi-3dgs {float(rows['edi-3dgs']['psnr']):.2f}, oracle {float(rows['oracle']['psnr']):.2f}"
+    )
     assert float(rows["eigs"]["psnr"]) > float(rows["3dgs"]["psnr"])  # acceptance: EiGS above 3DGS

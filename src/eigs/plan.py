@@ -4,8 +4,8 @@ Plain functions over the config dict (the merged `--configfile` documents): the 
 (built-in, ingested), its EDI rule (`events: false` scenes: `edi_frames`), its SfM rule (COLMAP, given poses, an
 existing model), the runs trained on it, each run's B and model file, and :func:`jobs`, every job of the `all`
 target by rule and wildcards. rules/common.smk and bench/schedule.py (with it bench/suite_ledger.py) read these,
-so the workflow and the schedule simulation cannot disagree. Per-method facts come through :func:`needs_events`,
-:func:`needs_ground_truth` and :func:`is_field_method`.
+so the workflow and the schedule simulation cannot disagree. Per-method facts come from the method catalog
+(:mod:`eigs.train.catalog`) through :func:`needs_events`, :func:`needs_ground_truth` and :func:`is_field_method`.
 
 Orders are the workflow's: scene lists sorted, a run's `scenes:` list in its own order.
 """
@@ -18,29 +18,24 @@ from typing import Any
 
 from eigs.events.options import DEFAULT_BINS
 from eigs.sfm.options import SfmConfig
-from eigs.train.field_config import FIELD_METHODS
-from eigs.train.method_inputs import EVENT_METHODS
+from eigs.train import catalog
 
 Config = Mapping[str, Any]
-
-# Methods that train on the scene's ground truth, so only on scenes that have it.
-GROUND_TRUTH_METHODS = frozenset({"oracle"})
-
 
 # --- per-method facts -----------------------------------------------------------------------------------------
 def needs_events(method: str) -> bool:
     """Whether ``method`` reads the scene's events (not scheduled on `events: false` scenes)."""
-    return method in EVENT_METHODS
+    return catalog.method(method).needs_events
 
 
 def needs_ground_truth(method: str) -> bool:
     """Whether ``method`` trains on the ground truth (scheduled only on scenes that have it)."""
-    return method in GROUND_TRUTH_METHODS
+    return catalog.method(method).needs_ground_truth
 
 
 def is_field_method(method: str) -> bool:
     """Whether ``method`` is a radiance-field method (model.npz, rule train_field) rather than Gaussian."""
-    return method in FIELD_METHODS
+    return catalog.method(method).family == catalog.FIELD
 
 
 # --- scenes ---------------------------------------------------------------------------------------------------

@@ -12,7 +12,8 @@ import yaml
 
 from eigs.tables.rows import configured_rows
 from eigs.train.config import TrainConfig
-from eigs.train.methods import REGISTRY, _load_all
+from eigs.train.options import options_json
+from eigs.train.resolve import method_options
 
 REPO = Path(__file__).resolve().parents[2]
 ABLATED = {"event_loss", "consistency"}  # the paper's Table II switches (L_event, L_consis); L_blur and ADE are on
@@ -22,11 +23,8 @@ EXPECTED = {"a": (False, False), "b": (True, False), "ours-minus": (False, True)
 
 def resolved(spec: dict[str, Any]) -> dict[str, Any]:
     """Every option a run trains with: the TrainConfig fields and the method's options with their defaults."""
-    _load_all()
-    opts = dict(spec.get("options", {}))
-    method_options = opts.pop("method_options", {})
-    cfg = TrainConfig.from_dict({"method": spec["method"], **opts})
-    method = {**REGISTRY[spec["method"]].OPTIONS, **method_options}
+    cfg = TrainConfig.from_dict({"method": spec["method"], **spec.get("options", {})})
+    method = options_json(method_options(cfg))
     train = {k: v for k, v in cfg.to_dict().items() if k not in ("method", "method_options")}
     return {**{f"train.{k}": v for k, v in train.items()}, **method, "bins": spec.get("bins")}
 

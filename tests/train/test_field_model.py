@@ -6,10 +6,11 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from eigs.train.cli import resolve_steps
+from eigs.train.catalog import METHODS, field_methods
 from eigs.train.config import TrainConfig
-from eigs.train.field_config import FIELD_METHODS, FieldOptions, FieldSteps, field_default_steps
+from eigs.train.field_config import FieldOptions
 from eigs.train.field_model import FieldModel, warp_np
+from eigs.train.resolve import train_config
 
 
 def _model(opts: FieldOptions, points=None, colours=None) -> FieldModel:
@@ -67,11 +68,10 @@ def test_core_grid_is_finer_and_seeding_goes_through_the_warp():
 
 
 def test_every_field_method_has_a_default_budget_that_eigs_train_uses():
-    assert {m.replace("-", "_") for m in FIELD_METHODS} == set(FieldSteps.__dataclass_fields__)
-    for m in FIELD_METHODS:
-        values = TrainConfig.from_dict({"method": m}).to_dict()
-        assert resolve_steps(values, {}, None) == field_default_steps(m) == getattr(FieldSteps(), m.replace("-", "_"))
-        assert resolve_steps({**values, "steps": 77}, {"steps": 77}, None) == 77  # the run's own steps win
-        assert resolve_steps(values, {}, 12) == 12  # --steps wins
-    gaussian = TrainConfig.from_dict({"method": "3dgs"}).to_dict()
-    assert resolve_steps(gaussian, {}, None) == TrainConfig().steps
+    assert field_methods() == {"nerf", "deblur-nerf", "edi-nerf", "e2nerf"}
+    for m in field_methods():
+        assert train_config({"method": m}).steps == METHODS[m].steps == 800
+        assert train_config({"method": m, "steps": 77}).steps == 77  # the run's own steps win
+        assert train_config({"method": m}, steps=12).steps == 12  # --steps wins
+        assert train_config({}, method_name=m).steps == 800  # --method with the method's budget
+    assert train_config({"method": "3dgs"}).steps == TrainConfig().steps == METHODS["3dgs"].steps

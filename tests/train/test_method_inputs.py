@@ -1,6 +1,6 @@
-"""Which methods need events: the light set the workflow reads (eigs.train.method_inputs.EVENT_METHODS) is what every
-registered method class says (``needs_events``), and it follows from each method's code: an event loss or a
-latent-frame term in its recipe, or EDI latent frames (or the EDI artifact's event counts) as what it trains on."""
+"""Which methods need events: the catalog's ``needs_events`` (eigs.train.catalog, what the workflow reads) follows
+from each method's code: an event loss or a latent-frame term in its recipe, or EDI latent frames (or the EDI
+artifact's event counts) as what it trains on."""
 
 from __future__ import annotations
 
@@ -12,17 +12,20 @@ import numpy as np
 import pytest
 
 from eigs.train.camera_motion import TrajectoryMethod
+from eigs.train.catalog import METHODS, event_methods, method_class
 from eigs.train.deblur import MultiRender
-from eigs.train.field_methods import FIELD_REGISTRY, ImageField
-from eigs.train.method_inputs import EVENT_METHODS, needs_events
-from eigs.train.methods import REGISTRY, ImageMethod, method_names, method_needs_events, warn_without_events
+from eigs.train.field_methods import ImageField
+from eigs.train.methods import ImageMethod, warn_without_events
 
 
-def reads_events_by_code(cls) -> bool:
-    """Whether a method's default recipe reads events, decided from its class."""
+def reads_events_by_code(name: str) -> bool:
+    """Whether a method's default recipe reads events, decided from its class and recipe."""
+    cls = method_class(name)
     if issubclass(cls, (MultiRender, TrajectoryMethod)):
-        o = cls.OPTIONS
-        return o["event_loss"] != "none" or float(o.get("latent_weight", 0)) > 0 or o.get("blur_target") == "discrete"
+        o = METHODS[name].defaults()
+        return (
+            o.event_loss != "none" or getattr(o, "latent_weight", 0) > 0 or getattr(o, "blur_target", "") == "discrete"
+        )
     if issubclass(cls, (ImageMethod, ImageField)):  # what samples() trains on: the latent frames or not
         data = mock.MagicMock()
         data.valid = np.ones((2, 3), bool)
@@ -33,17 +36,13 @@ def reads_events_by_code(cls) -> bool:
     return "data.edi" in inspect.getsource(cls)  # the other field methods: the event counts of the EDI artifact
 
 
-def test_every_method_class_reads_the_light_set():
-    assert EVENT_METHODS <= set(method_names())
-    for name in method_names():
-        assert method_needs_events(name) == needs_events(name) == (name in EVENT_METHODS), name
+def test_the_event_methods():
+    assert event_methods() == {"eigs", "eigs-b", "e2gs", "besplat", "evagaussians", "edi-3dgs", "edi-nerf", "e2nerf"}
 
 
-@pytest.mark.parametrize("name", sorted({*REGISTRY, *FIELD_REGISTRY}))
+@pytest.mark.parametrize("name", sorted(METHODS))
 def test_the_set_follows_from_the_code(name):
-    method_names()  # registers every method
-    cls = REGISTRY.get(name) or FIELD_REGISTRY[name]
-    assert cls.needs_events == reads_events_by_code(cls), name
+    assert METHODS[name].needs_events == reads_events_by_code(name), name
 
 
 def test_training_on_an_edi_without_events_warns(caplog):

@@ -14,10 +14,11 @@ import torch
 
 from eigs.artifacts.gaussians import read_gaussian_ply
 from eigs.errors import EigsError
+from eigs.train.catalog import method_class
 from eigs.train.config import TrainConfig
 from eigs.train.data import load_train_data
 from eigs.train.loop import Trainer, held_out_psnr, partial_dir_of, train
-from eigs.train.methods import REGISTRY, StepOutput
+from eigs.train.methods import StepOutput
 
 
 @pytest.fixture(scope="module")
@@ -87,7 +88,7 @@ def test_checkpoint_of_another_config_is_ignored(data, tmp_path):
 
 
 def test_non_finite_steps_are_skipped_then_stop(data, tmp_path, monkeypatch):
-    cls = REGISTRY["3dgs"]
+    cls = method_class("3dgs")
     orig = cls.step
 
     def poisoned(self, model, sample, step, sh_degree):

@@ -1,33 +1,21 @@
 """Which run fills which row of the paper's tables by default (the one place of these defaults): table → {row key →
-run name}. Row keys are those of :mod:`eigs.tables.paper`; ``oracle`` is the upper-bound row. The config's
-``tables:`` section replaces a table's mapping as a whole (:func:`table_rows`); a row whose run is not configured
-shows the paper's values only, so adding a method is one ``runs:`` line under the name used here."""
+run name}. Row keys are those of :mod:`eigs.tables.paper`; ``oracle`` is the upper-bound row. Table I has a row per
+method of the catalog (:mod:`eigs.train.catalog`, its ``table1`` entries in its order; row key = run name = method
+name) and the variants of :data:`TABLE1_VARIANTS`. The config's ``tables:`` section replaces a table's mapping as a
+whole (:func:`table_rows`); a row whose run is not configured shows the paper's values only, so adding a method is
+one ``runs:`` line under the name used here."""
 
 from __future__ import annotations
 
 from collections.abc import Iterable
 from typing import Any
 
+from eigs.train.catalog import METHODS
+
+# Table I's rows beyond one per method: runs of a method with other options, after the method's own row
+TABLE1_VARIANTS: dict[str, tuple[str, ...]] = {"eigs": ("eigs-literal", "eigs+")}
+# Tables II-V and the ladder
 DEFAULT_ROWS: dict[str, dict[str, str | None]] = {
-    "table1": {
-        # the NeRF columns: radiance-field runs (eigs.train.field_methods), not in the default suite's runs
-        "nerf": "nerf",
-        "deblur-nerf": "deblur-nerf",
-        "edi-nerf": "edi-nerf",
-        "e2nerf": "e2nerf",
-        "3dgs": "3dgs",
-        "deblurring-gs": "deblurring-gs",
-        "deblurring-gs+": "deblurring-gs+",
-        "e2gs": "e2gs",
-        "evagaussians": "evagaussians",
-        "besplat": "besplat",
-        "bad-gaussians": "bad-gaussians",
-        "eigs": "eigs",
-        "eigs-literal": "eigs-literal",
-        "eigs+": "eigs+",
-        "edi-3dgs": "edi-3dgs",
-        "oracle": "oracle",
-    },
     # Table II is the paper's ablation on `eigs` (the paper's reading); Tables III-V vary `eigs+` (EiGS with the
     # switches that pay, config/config.yaml): each of their rows changes one thing of it
     "table2": {"3dgs": "3dgs", "a": "eigs-a", "b": "eigs-b", "ours-minus": "eigs-minus", "ours": "eigs",
@@ -44,10 +32,21 @@ DEFAULT_ROWS: dict[str, dict[str, str | None]] = {
 OPTIONAL_TABLES: dict[str, tuple[str, ...]] = {"ladder": ("zero", "discrete", "trapezoid")}
 
 
+def table1_rows() -> dict[str, str | None]:
+    """Table I's default rows: every catalog method with ``table1`` and its :data:`TABLE1_VARIANTS`."""
+    keys = [k for name, spec in METHODS.items() if spec.table1 for k in (name, *TABLE1_VARIANTS.get(name, ()))]
+    return {k: k for k in keys}
+
+
+def default_rows() -> dict[str, dict[str, str | None]]:
+    """Every table's default mapping: Table I's from the catalog, the others' :data:`DEFAULT_ROWS`."""
+    return {"table1": table1_rows(), **{name: dict(rows) for name, rows in DEFAULT_ROWS.items()}}
+
+
 def table_rows(overrides: dict[str, Any] | None = None) -> dict[str, dict[str, str | None]]:
-    """The row mappings of every table: :data:`DEFAULT_ROWS` with the tables of ``overrides`` (the config's
+    """The row mappings of every table: :func:`default_rows` with the tables of ``overrides`` (the config's
     ``tables:`` section) replacing theirs. Row keys are strings (YAML may read ``4:`` as an integer)."""
-    out = {name: dict(rows) for name, rows in DEFAULT_ROWS.items()}
+    out = default_rows()
     for name, rows in (overrides or {}).items():
         out[name] = {str(k): (None if v is None else str(v)) for k, v in rows.items()}
     return out

@@ -24,6 +24,8 @@ import math
 import torch
 from torch import Tensor, nn
 
+from eigs.train.method_options import PRECISIONS
+
 CHUNK_ROWS = 1024  # Gaussians per block of FusedMLP (1024–2048 measured fastest; 4096 and whole-array slower)
 CHUNK_ROWS_BF16 = 4096  # the same in bfloat16 (AMX, 17k rows, one thread: 1024 43 ms, 2048 35, 4096 33, all 51)
 
@@ -48,9 +50,6 @@ def block_rows(x: Tensor) -> int:
     if x.device.type != "cpu":
         return max(1, x.shape[0])
     return CHUNK_ROWS_BF16 if x.dtype == torch.bfloat16 else CHUNK_ROWS
-
-
-PRECISIONS = ("auto", "float32", "bfloat16")
 
 
 def bf16_matmul_is_native(device: torch.device) -> bool:

@@ -16,8 +16,6 @@ noise, as BAD-Gaussians starts from one COLMAP pose per image.
 
 from __future__ import annotations
 
-from typing import Any, ClassVar
-
 import numpy as np
 import torch
 from torch import Tensor
@@ -34,51 +32,26 @@ from eigs.losses.events import (
 from eigs.train.config import TrainConfig
 from eigs.train.data import TrainData
 from eigs.train.event_inputs import EventInputs
-from eigs.train.methods import LatentMotion, Method, StepOutput, register
+from eigs.train.method_options import TrajectoryOptions
+from eigs.train.methods import LatentMotion, Method, StepOutput
 from eigs.train.model import GaussianModel
 from eigs.train.rigid import transform_gaussians
-from eigs.train.trajectory import MODES, curve_weights, fit_controls, se3_exp, se3_log
-
-TRAJECTORY_OPTIONS: dict[str, Any] = {
-    "mode": "linear",  # trajectory curve: linear, cubic (B-spline) or bezier
-    "n_control": 2,  # control twists of the curve (linear 2, cubic 4, Bézier ≥ 2)
-    "n_virtual": 10,  # virtual cameras rendered per step (BAD-Gaussians: 10)
-    "init": "latent",  # "latent" (fit to the SfM latent poses) or "reference" (zero motion + 1e-5 noise)
-    "lr_pose": 1e-3,  # Adam learning rate of the control twists (rad and scene units per step)
-    "event_loss": "none",  # "none", "eigs" (Eq. 9–10, L1 of the integral) or "normalized" (BeSplat)
-    "lambda_event": 0.0,
-    "lambda_blur": 1.0,
-    "sharp_one_render": True,  # views EDI marks sharp (too few events) use one render at P_ref, blur loss only
-}
+from eigs.train.trajectory import curve_weights, fit_controls, se3_exp, se3_log
 
 
 class TrajectoryMethod(Method):
-    """A per-view camera trajectory, ``n_virtual`` renders per step. Subclasses set ``RECIPE``."""
-
-    RECIPE: ClassVar[dict[str, Any]] = {}
-    OPTIONS = TRAJECTORY_OPTIONS
-
-    def __init_subclass__(cls, **kw: Any) -> None:
-        super().__init_subclass__(**kw)
-        cls.OPTIONS = {**TRAJECTORY_OPTIONS, **cls.RECIPE}
+    """A per-view camera trajectory, ``n_virtual`` renders per step; the catalog's recipe of each method
+    (``bad-gaussians``, ``besplat``, ``evagaussians``) sets its :class:`TrajectoryOptions`."""
 
     def __init__(self, data: TrainData, cfg: TrainConfig, device: torch.device):
         super().__init__(data, cfg, device)
-        o = self.options
+        assert isinstance(self.opts, TrajectoryOptions)
+        o: TrajectoryOptions = self.opts
+        self.o = o
         where = f"method {self.name}"
-        mode, k_ctrl, n_virt = str(o["mode"]), int(o["n_control"]), int(o["n_virtual"])
-        if mode not in MODES:
-            raise EigsError(where, f"mode must be one of {', '.join(MODES)}, got {mode!r}")
-        try:
-            curve_weights(mode, k_ctrl, torch.zeros(1))
-        except ValueError as err:
-            raise EigsError(where, str(err)) from None
-        if n_virt < 2 or o["init"] not in ("latent", "reference"):
-            raise EigsError(where, "n_virtual must be >= 2 and init latent or reference")
-        if o["event_loss"] not in ("none", "eigs", "normalized"):
-            raise EigsError(where, f"event_loss must be none, eigs or normalized, got {o['event_loss']!r}")
+        mode, k_ctrl, n_virt = o.mode, o.n_control, o.n_virtual
         self.n_bins = data.n_latent - 1
-        if o["event_loss"] != "none" and (n_virt - 1) % self.n_bins != 0:
+        if o.event_loss != "none" and (n_virt - 1) % self.n_bins != 0:
             raise EigsError(where, f"event losses need n_virtual - 1 to be a multiple of the EDI bins {self.n_bins}")
         self.views = data.reference_views()
         if self.views.size == 0:
@@ -90,7 +63,7 @@ class TrajectoryMethod(Method):
         self.ref_f = self.ref.float().to(device)
         self.ref_inv_f = torch.linalg.inv(torch.nan_to_num(self.ref)).float().to(device)
         controls = torch.zeros(data.n_views, k_ctrl, 6, dtype=torch.float64)
-        if o["init"] == "latent":
+        if o.init == "latent":
             t_lat = torch.linspace(0.0, 1.0, data.n_latent, dtype=torch.float64)
             for v in self.views:
                 ok = torch.from_numpy(data.valid[v])
@@ -109,7 +82,7 @@ class TrajectoryMethod(Method):
         return int(self.views.size)
 
     def param_groups(self) -> list[dict]:
-        return [{"params": [self.controls], "lr": float(self.options["lr_pose"]), "name": "trajectory"}]
+        return [{"params": [self.controls], "lr": self.o.lr_pose, "name": "trajectory"}]
 
     def state_dict(self) -> dict:
         return {"controls": self.controls.detach().cpu().clone()}
@@ -142,11 +115,11 @@ class TrajectoryMethod(Method):
         return self.ref_f[v] @ se3_exp(-xi) @ self.ref_inv_f[v]
 
     def step(self, model: GaussianModel, sample: int, step: int, sh_degree: int) -> StepOutput:
-        d, o = self.data, self.options
+        d, o = self.data, self.o
         v = int(self.views[sample])
         p = model.params
         images, infos = [], []
-        if o["sharp_one_render"] and bool(self.events.sharp[v]):  # no motion to model: one render, the frame as target
+        if o.sharp_one_render and bool(self.events.sharp[v]):  # no motion to model: one render, the frame as target
             return self.photometric_step(model, self.ref[v], self.blurry[v], sh_degree)
         for g in self.gaussian_motions(v):
             means, quats = transform_gaussians(p["means"], p["quats"], g)
@@ -158,43 +131,21 @@ class TrajectoryMethod(Method):
         stack = torch.stack(images)  # (n_virtual, H, W, C)
         blur = from_linear(to_linear(stack, self.response).mean(dim=0), self.response)
         loss, l1, dssim = photometric_loss(blur, self.blurry[v], self.cfg.lambda_dssim)
-        loss = float(o["lambda_blur"]) * loss
+        loss = o.lambda_blur * loss
         terms = {"l1": l1.item(), "dssim": dssim.item()}
-        if o["event_loss"] != "none":
+        if o.event_loss != "none":
             stride = (self.n_virtual - 1) // self.n_bins
             logs = log_intensity(stack[::stride], self.response, self.events.mode)  # (L, H, W) at the latent times
             counts = self.events.counts[v]
             terms_ev = []
             for k in range(self.n_bins):
                 e = counts[k + 1] - counts[k]
-                if o["event_loss"] == "eigs":
+                if o.event_loss == "eigs":
                     c_pos, c_neg = self.events.thresholds(v)
                     terms_ev.append(event_integration_loss(logs[k], logs[k + 1], e, c_pos, c_neg, self.events.mask))
                 else:
                     terms_ev.append(normalized_event_loss(logs[k], logs[k + 1], e, self.events.mask))
             ev = torch.stack(terms_ev).mean()
-            loss = loss + float(o["lambda_event"]) * ev
+            loss = loss + o.lambda_event * ev
             terms["event"] = ev.item()
         return StepOutput(loss, terms, infos)
-
-
-@register
-class BADGaussians(TrajectoryMethod):
-    name = "bad-gaussians"
-    description = "BAD-Gaussians: a per-view linear SE(3) trajectory, 10 virtual cameras, RGB blur loss only"
-    RECIPE = {}
-
-
-@register
-class BeSplat(TrajectoryMethod):
-    name = "besplat"
-    description = "BeSplat: a per-view Bézier trajectory, many virtual cameras, L2-normalised log-difference event loss"
-    # BeSplat uses 19 virtual views and a degree-7 Bézier; 17 = 4·4 + 1 puts the N = 4 latent times on virtual views
-    RECIPE = {"mode": "bezier", "n_control": 4, "n_virtual": 17, "event_loss": "normalized", "lambda_event": 2.0}
-
-
-@register
-class EvaGaussians(TrajectoryMethod):
-    name = "evagaussians"
-    description = "EvaGaussians (our reading, no public code): cubic B-spline trajectory, blur + event integral losses"
-    RECIPE = {"mode": "cubic", "n_control": 4, "n_virtual": 9, "event_loss": "eigs", "lambda_event": 0.1}

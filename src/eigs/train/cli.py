@@ -20,27 +20,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         default="{}",
         metavar="JSON",
         help="training options as a JSON object (keys of eigs.train.config.TrainConfig; the workflow passes the "
-        "run's `options:` here); a field method without `steps` trains for its default budget "
-        "(eigs.train.field_config.FieldSteps)",
+        "run's `options:` here); without `steps` a method trains for its default budget (eigs.train.catalog)",
     )
     p.add_argument("--steps", type=int, default=None, help="override the number of steps")
     p.add_argument("--device", default="auto", choices=("auto", "cpu", "cuda"), help="auto: CUDA when available")
     p.add_argument(
-        "--list", action="store_true",
+        "--list",
+        action="store_true",
         help="list the methods and exit ([needs events]: not scheduled on scenes configured with `events: false`)",
     )
-
-
-def resolve_steps(values: dict, given: dict, steps_arg: int | None) -> int:
-    """The run's step count: ``--steps``, else the ``--config`` JSON's ``steps`` (``given``), else for a field method
-    its own budget (:class:`eigs.train.field_config.FieldSteps`), else the resolved ``values["steps"]``."""
-    from eigs.train.field_config import FIELD_METHODS, field_default_steps
-
-    if steps_arg is not None:
-        return int(steps_arg)
-    if "steps" not in given and values["method"] in FIELD_METHODS:
-        return field_default_steps(values["method"])
-    return int(values["steps"])
 
 
 def run(args: argparse.Namespace) -> int:
@@ -50,34 +38,30 @@ def run(args: argparse.Namespace) -> int:
     import torch
 
     from eigs.errors import EigsError
+    from eigs.train.catalog import FIELD, METHODS
     from eigs.train.config import TrainConfig
     from eigs.train.data import load_train_data
-    from eigs.train.field_methods import is_field_method
     from eigs.train.loop import train
-    from eigs.train.methods import method_description, method_names, method_needs_events
+    from eigs.train.resolve import train_config
 
     if args.list:
-        for name in method_names():
-            events = " [needs events]" if method_needs_events(name) else ""
-            print(f"{name:16s} {method_description(name)}{events}")
+        for name, spec in sorted(METHODS.items()):
+            events = " [needs events]" if spec.needs_events else ""
+            print(f"{name:16s} {spec.description}{events}")
         return 0
     missing = [n for n in ("scene", "edi", "sfm", "init", "output") if getattr(args, n) is None]
     if missing:
         usage = "eigs train SCENE.h5 EDI.h5 SFM_DIR INIT.ply -o RUN_DIR"
         raise EigsError("eigs train", f"missing {', '.join(missing)}: {usage}")
-    cfg = TrainConfig.from_json(args.config, where="--config")
-    values = cfg.to_dict()
-    if args.method is not None:
-        values["method"] = args.method
-    values["steps"] = resolve_steps(values, json.loads(args.config or "{}"), args.steps)
-    cfg = TrainConfig.from_dict(values, where="command line")
+    TrainConfig.from_json(args.config, where="--config")  # the JSON, its keys and types
+    cfg = train_config(json.loads(args.config or "{}"), "--config", args.method, args.steps)
     if args.device == "cuda" and not torch.cuda.is_available():
         raise EigsError("--device", "cuda requested but no CUDA device is available")
     device = torch.device("cuda" if args.device == "cuda" or (args.device == "auto" and torch.cuda.is_available())
                           else "cpu")  # fmt: skip
     data = load_train_data(args.scene, args.edi, args.sfm, args.init)
     inputs = {"scene": args.scene, "edi": args.edi, "sfm": args.sfm, "init": args.init}
-    if is_field_method(cfg.method):
+    if METHODS[cfg.method].family == FIELD:
         from eigs.train.field_loop import train_field
 
         fres = train_field(data, cfg, args.output, device, inputs=inputs)

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from eigs.errors import EigsError
+from eigs.train.options import coerce, unknown_keys
 
 
 @dataclass
@@ -93,19 +94,9 @@ class TrainConfig:
         """Build from a (partial) mapping; unknown keys and wrong types raise :class:`EigsError` naming them."""
         if not isinstance(values, dict):
             raise EigsError(where, f"expected a mapping of options, got {type(values).__name__}")
-        fields = {f.name: f for f in dataclasses.fields(cls)}
-        unknown = sorted(set(values) - set(fields))
-        if unknown:
-            raise EigsError(where, f"unknown training option(s) {', '.join(unknown)}; known: {', '.join(fields)}")
+        unknown_keys(values, [f.name for f in dataclasses.fields(cls)], where, "training option")
         defaults = cls()
-        kw: dict[str, Any] = {}
-        for name, value in values.items():
-            want = type(getattr(defaults, name))
-            if want is float and isinstance(value, int) and not isinstance(value, bool):
-                value = float(value)
-            if not isinstance(value, want) or (want is int and isinstance(value, bool)):
-                raise EigsError(where, f"option {name} must be {want.__name__}, got {value!r}")
-            kw[name] = value
+        kw = {name: coerce(name, getattr(defaults, name), value, where) for name, value in values.items()}
         cfg = cls(**kw)
         cfg.validate(where)
         return cfg

@@ -9,15 +9,13 @@ intensity (Eq. 2/7) and compare with the blurry frame (Eq. 8); add the event los
 
 from __future__ import annotations
 
-from typing import Any, ClassVar
-
 import numpy as np
 import torch
 from torch import Tensor
 
 from eigs.errors import EigsError
 from eigs.losses import photometric_loss
-from eigs.losses.consistency import DEFAULT_DELTA, DEFAULT_REG, motion_consistency_loss
+from eigs.losses.consistency import motion_consistency_loss
 from eigs.losses.events import (
     e2nerf_event_loss,
     event_integration_loss,
@@ -27,53 +25,14 @@ from eigs.losses.events import (
     luma,
     to_linear,
 )
-from eigs.train.ade import ADE, PRECISIONS, compute_dtype
+from eigs.train.ade import ADE, compute_dtype
 from eigs.train.config import TrainConfig
 from eigs.train.data import TrainData
 from eigs.train.event_inputs import EventInputs
-from eigs.train.methods import LatentMotion, Method, StepOutput, register
+from eigs.train.method_options import MultiRenderOptions
+from eigs.train.methods import LatentMotion, Method, StepOutput
 from eigs.train.model import GaussianModel
 from eigs.train.rigid import transform_gaussians
-
-# Options every multi-render method takes; each method overrides the defaults of its recipe in RECIPE.
-COMMON_OPTIONS: dict[str, Any] = {
-    "ade": True,  # per-Gaussian displacements from the ADE network (False: render the latent poses P_k)
-    "shape": False,  # ADE also predicts rotation and scale changes (Deblurring-GS+)
-    "event_loss": "eigs",  # "eigs" (Eq. 9–10), "e2nerf" (E²NeRF/E2GS pairwise) or "none"
-    "consistency": True,  # motion-consistency loss (Eq. 3–6)
-    "lambda_p": 1e-2,  # λ_p, scale of the predicted displacements (and rotation/scale changes)
-    "lambda_event": 0.005,
-    # beyond the paper: sensor-noise-aware event loss (eigs.losses.events.event_integration_loss): errors up to
-    # event_deadzone + event_mismatch·|E| events are free (count quantisation, threshold mismatch, refractory period)
-    "event_deadzone": 0.0,
-    "event_mismatch": 0.0,
-    "lambda_consis": 1.0,
-    "huber_delta": DEFAULT_DELTA,
-    "consis_reg": DEFAULT_REG,
-    "grad_through_fit": True,
-    "width": 256,
-    "depth": 3,
-    "x_freqs": 4,
-    "pose_freqs": 4,
-    "lr_ade": 1e-3,
-    # dtype of the ADE's matrix products: "float32", "bfloat16" (mixed precision: float32 parameters, Adam and
-    # outputs; bfloat16 products and kept activations) or "auto" (bfloat16 where the hardware multiplies it
-    # natively: AMX / AVX512-BF16 CPUs, bf16 GPUs; float32 elsewhere). docs/training.md "ADE precision"
-    "ade_precision": "auto",
-    "pose_prior": False,  # beyond the paper: ADE predicts the residual to the displacement the latent poses imply
-    "subframes": 1,  # beyond the paper: renders per latent interval (> 1 adds interpolated displacements)
-    "blur_weights": "uniform",  # "uniform" (Eq. 2) or "trapezoid" (the exposure integral by the trapezoid rule)
-    # beyond the paper: "blurry" (Eq. 8) or "discrete" (the blurry frame corrected for the N+1-sample average by the
-    # events: the average of EDI's latent frames with the same weights, which equals the continuous exposure
-    # average of the frame; docs/methods.md)
-    "blur_target": "blurry",
-    # beyond the paper: L1 between each latent render k and EDI's latent frame k, with this weight (0: off); the
-    # event-integration loss constrains only differences of consecutive renders, this ties each render to the frame
-    # the events and the blurry frame imply for its time (no extra renders)
-    "latent_weight": 0.0,
-    "ade_zero_last": False,  # beyond the paper: the ADE's last layer starts at zero (no displacement at step 0)
-    "sharp_one_render": True,  # views EDI marks sharp (too few events) use one render and the photometric loss only
-}
 
 
 def rigid_inverse(c2w: Tensor) -> Tensor:
@@ -87,34 +46,14 @@ def rigid_inverse(c2w: Tensor) -> Tensor:
 
 
 class MultiRender(Method):
-    """N+1 renders per step. Subclasses set ``RECIPE`` (option defaults that define the method)."""
-
-    RECIPE: ClassVar[dict[str, Any]] = {}
-    OPTIONS = COMMON_OPTIONS
-
-    def __init_subclass__(cls, **kw: Any) -> None:
-        super().__init_subclass__(**kw)
-        cls.OPTIONS = {**COMMON_OPTIONS, **cls.RECIPE}
+    """N+1 renders per step; the catalog's recipe of each method (``eigs``, ``eigs-b``, ``e2gs``, …) sets its
+    :class:`MultiRenderOptions`."""
 
     def __init__(self, data: TrainData, cfg: TrainConfig, device: torch.device):
         super().__init__(data, cfg, device)
-        o = self.options
-        if o["event_loss"] not in ("eigs", "e2nerf", "none"):
-            raise EigsError(f"method {self.name}", f"event_loss must be eigs, e2nerf or none, got {o['event_loss']!r}")
-        if (o["consistency"] or o["shape"] or o["pose_prior"] or int(o["subframes"]) != 1) and not o["ade"]:
-            raise EigsError(f"method {self.name}", "consistency, shape, pose_prior, subframes need the ADE (ade: true)")
-        if o["ade_precision"] not in PRECISIONS:
-            raise EigsError(f"method {self.name}", f"ade_precision must be one of {', '.join(PRECISIONS)}")
-        if float(o["event_deadzone"]) < 0 or float(o["event_mismatch"]) < 0:
-            raise EigsError(f"method {self.name}", "event_deadzone and event_mismatch must be >= 0")
-        if int(o["subframes"]) < 1 or o["blur_weights"] not in ("uniform", "trapezoid"):
-            raise EigsError(f"method {self.name}", "subframes must be >= 1 and blur_weights uniform or trapezoid")
-        if o["blur_target"] not in ("blurry", "discrete") or (
-            o["blur_target"] == "discrete" and int(o["subframes"]) != 1
-        ):
-            raise EigsError(
-                f"method {self.name}", "blur_target must be blurry or discrete (discrete needs subframes 1)"
-            )
+        assert isinstance(self.opts, MultiRenderOptions)
+        o: MultiRenderOptions = self.opts
+        self.o = o
         self.views = data.reference_views()
         if self.views.size == 0:
             raise EigsError(data.scene.name, f"method {self.name}: no view has a valid reference pose")
@@ -125,25 +64,23 @@ class MultiRender(Method):
         c2w[bad] = c2w[:, :1].expand_as(c2w)[bad]
         self.c2w = c2w  # (V, L, 4, 4) float64
         self.response = data.camera_response
-        self.blurry = (data.blurry if o["blur_target"] == "blurry" else self.discrete_targets()).to(device)
-        if float(o["latent_weight"]) < 0:
-            raise EigsError(f"method {self.name}", "latent_weight must be >= 0")
-        self.latent = data.latent.to(device) if float(o["latent_weight"]) > 0 else None  # (V, L, H, W, C)
+        self.blurry = (data.blurry if o.blur_target == "blurry" else self.discrete_targets()).to(device)
+        self.latent = data.latent.to(device) if o.latent_weight > 0 else None  # (V, L, H, W, C)
         self.valid = torch.from_numpy(data.valid)  # (V, L) latent poses SfM registered
         self.events = EventInputs.from_edi(data.edi, device)
         self.ade: ADE | None = None
-        if o["ade"]:
+        if o.ade:
             self.ade = ADE(
                 n_latent=self.n_latent,
                 n_moved=self.n_latent - 1,
-                width=int(o["width"]),
-                depth=int(o["depth"]),
-                x_freqs=int(o["x_freqs"]),
-                pose_freqs=int(o["pose_freqs"]),
-                out_per_latent=10 if o["shape"] else 3,
-                matmul_dtype=compute_dtype(str(o["ade_precision"]), device),
+                width=o.width,
+                depth=o.depth,
+                x_freqs=o.x_freqs,
+                pose_freqs=o.pose_freqs,
+                out_per_latent=10 if o.shape else 3,
+                matmul_dtype=compute_dtype(o.ade_precision, device),
             ).to(device)
-            if o["ade_zero_last"]:
+            if o.ade_zero_last:
                 with torch.no_grad():
                     self.ade.last.weight.zero_()
             self.pose_inputs = torch.stack([self.ade.encode_poses(self.c2w[v]) for v in range(data.n_views)]).to(device)
@@ -171,7 +108,7 @@ class MultiRender(Method):
     def param_groups(self) -> list[dict]:
         if self.ade is None:
             return []
-        return [{"params": list(self.ade.parameters()), "lr": float(self.options["lr_ade"]), "name": "ade"}]
+        return [{"params": list(self.ade.parameters()), "lr": self.o.lr_ade, "name": "ade"}]
 
     def state_dict(self) -> dict:
         return {"ade": self.ade.state_dict()} if self.ade is not None else {}
@@ -186,7 +123,7 @@ class MultiRender(Method):
     ) -> tuple[list[Tensor], list[dict], Tensor | None, list[int]]:
         """Renders of view v in time order, their infos, the raw ADE displacements (N_G, N, 3) or None, and the
         positions of the N+1 latent renders in the list (every render is one with ``subframes = 1``)."""
-        d, o = self.data, self.options
+        d, o = self.data, self.o
         images, infos = [], []
 
         def render(c2w: Tensor, **moved: Tensor) -> None:
@@ -202,9 +139,9 @@ class MultiRender(Method):
         p = model.params
         out, disp, prior_quats = self.latent_offsets(v, p["means"].detach(), p["quats"])
         dx = out[..., :3]
-        lam = float(o["lambda_p"])
-        shape = [None] + [lam * out[:, k - 1, 3:] for k in range(1, self.n_latent)] if o["shape"] else None
-        sub = int(o["subframes"])
+        lam = o.lambda_p
+        shape = [None] + [lam * out[:, k - 1, 3:] for k in range(1, self.n_latent)] if o.shape else None
+        sub = o.subframes
         latent_pos = []
         for k in range(self.n_latent):
             for j in range(sub if k > 0 else 1):
@@ -213,7 +150,7 @@ class MultiRender(Method):
                     latent_pos.append(len(images))
                 off = disp[k] if f == 1.0 else f * disp[k] + (1 - f) * disp[k - 1]
                 moved = {"means": p["means"] + off} if k > 0 else {}
-                if k > 0 and o["pose_prior"]:  # rotations follow the prior of the nearest latent time
+                if k > 0 and o.pose_prior:  # rotations follow the prior of the nearest latent time
                     q = prior_quats[k if f >= 0.5 else k - 1]
                     moved["quats"] = p["quats"] if q is None else q
                 if shape is not None and k > 0:
@@ -231,15 +168,15 @@ class MultiRender(Method):
     def latent_offsets(self, v: int, x: Tensor, quats: Tensor) -> tuple[Tensor, list[Tensor], list[Tensor | None]]:
         """The ADE's raw output (G, N, 3 or 10) for view v at centres ``x`` (G, 3) (detached), the centre offsets
         at the latent times k = 0..N (k = 0: zero) and, with the pose prior, the rotated quaternions per k."""
-        o = self.options
+        o = self.o
         assert self.ade is not None
         out = self.ade(x, self.pose_inputs[v])  # (G, N, 3 or 10)
-        lam = float(o["lambda_p"])
+        lam = o.lambda_p
         disp = [torch.zeros_like(x)]
         prior_quats: list[Tensor | None] = [None] * self.n_latent
         for k in range(1, self.n_latent):
             dk = lam * out[:, k - 1, :3]
-            if o["pose_prior"]:  # the Gaussians moved by P_0·P_k⁻¹ (centres and rotations) render what P_k sees
+            if o.pose_prior:  # the Gaussians moved by P_0·P_k⁻¹ (centres and rotations) render what P_k sees
                 moved_x, prior_quats[k] = transform_gaussians(x, quats, self.relative[v, k - 1])
                 dk = dk + (moved_x - x)
             disp.append(dk)
@@ -273,7 +210,7 @@ class MultiRender(Method):
 
     def blur_weights(self, n: int) -> Tensor:
         """Weights of the n time-ordered renders in the blur average: uniform (Eq. 2) or trapezoidal."""
-        if self.options["blur_weights"] == "uniform" or n == 1:
+        if self.o.blur_weights == "uniform" or n == 1:
             return torch.full((n,), 1.0 / n)
         w = torch.ones(n)
         w[0] = w[-1] = 0.5
@@ -284,9 +221,9 @@ class MultiRender(Method):
         return self.photometric_step(model, self.c2w[v, 0], self.blurry[v], sh_degree)
 
     def step(self, model: GaussianModel, sample: int, step: int, sh_degree: int) -> StepOutput:
-        o = self.options
+        o = self.o
         v = int(self.views[sample])
-        if o["sharp_one_render"] and bool(self.events.sharp[v]):
+        if o.sharp_one_render and bool(self.events.sharp[v]):
             return self.sharp_step(model, v, sh_degree)
         images, infos, dx, latent_pos = self.renders(model, v, sh_degree)
         stack = torch.stack(images)  # (R, H, W, C) in time order
@@ -295,79 +232,37 @@ class MultiRender(Method):
         stack = stack[latent_pos]  # the N+1 latent renders for the event losses
         loss, l1, dssim = photometric_loss(blur, self.blurry[v], self.cfg.lambda_dssim)
         terms = {"l1": l1.item(), "dssim": dssim.item()}
-        if o["event_loss"] == "eigs":
+        if o.event_loss == "eigs":
             logs = log_intensity(stack, self.response, self.events.mode)  # (L, H, W)
             counts = self.events.counts[v]
             c_pos, c_neg = self.events.thresholds(v)
-            dz, mm = float(o["event_deadzone"]), float(o["event_mismatch"])
+            dz, mm = o.event_deadzone, o.event_mismatch
             ev = torch.stack([
                 event_integration_loss(logs[k], logs[k + 1], counts[k + 1] - counts[k], c_pos, c_neg, self.events.mask,
                                        deadzone=dz, mismatch=mm)
                 for k in range(self.n_latent - 1)
             ]).mean()  # fmt: skip
-            loss = loss + float(o["lambda_event"]) * ev
+            loss = loss + o.lambda_event * ev
             terms["event"] = ev.item()
-        elif o["event_loss"] == "e2nerf":
+        elif o.event_loss == "e2nerf":
             logs = lin_log(255.0 * luma(stack.clamp(0, 1)))
             ev = e2nerf_event_loss(logs, self.events.counts[v])
-            loss = loss + float(o["lambda_event"]) * ev
+            loss = loss + o.lambda_event * ev
             terms["event"] = ev.item()
         if self.latent is not None:
             ok = self.valid[v].to(stack.device)  # a latent frame without a pose has no render of its own time
             lat = (stack[ok] - self.latent[v][ok]).abs().mean()
-            loss = loss + float(o["latent_weight"]) * lat
+            loss = loss + o.latent_weight * lat
             terms["latent"] = lat.item()
-        if o["consistency"] and dx is not None:
+        if o.consistency and dx is not None:
             x = model.params["means"].detach()
             cons = torch.stack([
-                motion_consistency_loss(x, dx[:, k], reg=float(o["consis_reg"]), delta=float(o["huber_delta"]),
-                                        grad_through_fit=bool(o["grad_through_fit"]))
+                motion_consistency_loss(x, dx[:, k], reg=o.consis_reg, delta=o.huber_delta,
+                                        grad_through_fit=o.grad_through_fit)
                 for k in range(dx.shape[1])
             ]).mean()  # fmt: skip
-            loss = loss + float(o["lambda_consis"]) * cons
+            loss = loss + o.lambda_consis * cons
             terms["consis"] = cons.item()
         if dx is not None:
-            terms["disp"] = float(o["lambda_p"]) * dx.detach().norm(dim=-1).mean().item()
+            terms["disp"] = o.lambda_p * dx.detach().norm(dim=-1).mean().item()
         return StepOutput(loss, terms, infos)
-
-
-@register
-class EiGS(MultiRender):
-    name = "eigs"
-    description = "EiGS: ADE displacements, blur + event-integration + motion-consistency losses"
-    RECIPE = {}
-
-
-@register
-class EiGSb(MultiRender):
-    name = "eigs-b"
-    description = "EiGS without the motion-consistency loss (Table II (b))"
-    RECIPE = {"consistency": False}
-
-
-@register
-class EiGSminus(MultiRender):
-    name = "eigs-minus"
-    description = "EiGS without the event loss (Table II Ours−)"
-    RECIPE = {"event_loss": "none"}
-
-
-@register
-class DeblurringGS(MultiRender):
-    name = "deblurring-gs"
-    description = "Deblurring-GS: ADE displacements and the blur loss only (Table II (a))"
-    RECIPE = {"event_loss": "none", "consistency": False}
-
-
-@register
-class DeblurringGSPlus(MultiRender):
-    name = "deblurring-gs+"
-    description = "Deblurring-GS+: ADE also predicts rotation and scale changes, blur loss only"
-    RECIPE = {"event_loss": "none", "consistency": False, "shape": True}
-
-
-@register
-class E2GS(MultiRender):
-    name = "e2gs"
-    description = "E2GS (w/ est. poses): renders at the N+1 fixed latent poses, blur + E²NeRF-style event loss"
-    RECIPE = {"ade": False, "consistency": False, "event_loss": "e2nerf", "lambda_event": 0.02}

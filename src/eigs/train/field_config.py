@@ -1,7 +1,8 @@
-"""Options of the radiance-field methods (``nerf``, ``deblur-nerf``, ``edi-nerf``, ``e2nerf``): the one source of
-their defaults. A run sets them in ``options: {method_options: {…}}``; the shared keys of
+"""Options of the radiance-field methods (``nerf``, ``deblur-nerf``, ``edi-nerf``, ``e2nerf``; no torch): the one
+source of their defaults and checks. A run sets them in ``options: {method_options: {…}}``; the shared keys of
 :class:`eigs.train.config.TrainConfig` that a field run reads are ``steps``, ``seed``, ``log_every``, ``eval_every``,
-``checkpoint_every`` and ``max_bad_steps`` (the Gaussian learning rates and densification keys do not apply).
+``checkpoint_every`` and ``max_bad_steps`` (the Gaussian learning rates and densification keys do not apply). A
+field method's default budget (``steps``) is its catalog entry's (:mod:`eigs.train.catalog`).
 
 Units: world units of the canonical SfM frame (RMS camera radius 1); voxel counts are totals over the grid (its
 shape follows the box's aspect); fractions are of the run's steps.
@@ -9,16 +10,13 @@ shape follows the box's aspect); fractions are of the run's steps.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
-from typing import Any
+from dataclasses import dataclass
 
-# The field methods' names (the registry in eigs.train.field_methods holds exactly these; the workflow reads this
-# set, without importing torch, to give a field run its model file, model.npz instead of model.ply)
-FIELD_METHODS = frozenset({"nerf", "deblur-nerf", "edi-nerf", "e2nerf"})
+from eigs.train.options import Options
 
 
 @dataclass(frozen=True)
-class FieldOptions:
+class FieldOptions(Options):
     """Every option of the radiance field and its training, with its default."""
 
     # the representation: "grid" (a dense voxel grid of density and colour, DVGO / Plenoxels style) or "grid+vm" (the
@@ -86,9 +84,34 @@ class FieldOptions:
     lr_basis: float = 1e-3
     vm_tv_colour: float = 0.0  # total variation of the colour factors (mean squared neighbour differences, summed)
 
+    def problems(self) -> list[str]:
+        grow = self.grow_at
+        checks = [
+            (self.batch_rays >= 1 and self.n_samples >= 1, "batch_rays and n_samples must be >= 1"),
+            (0 <= self.box_quantile < 0.5 and min(self.box_margin, self.box_camera_margin) >= 0,
+             "box_quantile must lie in [0, 0.5), box_margin and box_camera_margin >= 0"),
+            (8 <= self.voxels_start <= self.voxels_final, "need 8 <= voxels_start <= voxels_final"),
+            (all(0 < f <= 1 for f in grow) and list(grow) == sorted(grow), "grow_at: increasing in (0, 1]"),
+            (0 < self.alpha_init < 1 and 0 < self.occupancy_weight < 1,
+             "alpha_init and occupancy_weight must lie in (0, 1)"),
+            (self.lr_grid >= 0 and 0 < self.lr_decay <= 1, "lr_grid must be >= 0 and lr_decay in (0, 1]"),
+            (min(self.tv_density, self.tv_colour, self.distortion, self.near) >= 0,
+             "tv weights, distortion and near must be >= 0"),
+            (self.occupancy_every >= 1 and self.occupancy_start >= 0, "occupancy_every >= 1, occupancy_start >= 0"),
+            (self.core_ratio >= 1 and self.core_radius > 0, "core_ratio must be >= 1 and core_radius > 0"),
+            (self.field in ("grid", "grid+vm"), f"field must be 'grid' or 'grid+vm', got {self.field!r}"),
+            (8 <= self.vm_voxels_start <= self.vm_voxels_final, "need 8 <= vm_voxels_start <= vm_voxels_final"),
+            (self.vm_colour_channels >= 1 and self.vm_init_scale > 0 and self.density_scale > 0,
+             "vm_colour_channels >= 1, vm_init_scale and density_scale > 0"),
+            (min(self.lr_factors, self.lr_basis, self.vm_tv_colour) >= 0,
+             "lr_factors, lr_basis and vm_tv_colour must be >= 0"),
+        ]  # fmt: skip
+        return [msg for ok, msg in checks if not ok]
+
+
 @dataclass(frozen=True)
-class DeblurNerfOptions:
-    """Deblur-NeRF's deformable sparse kernel (DSK)."""
+class DeblurNerfOptions(FieldOptions):
+    """The field's options and Deblur-NeRF's deformable sparse kernel (DSK)."""
 
     kernel_points: int = 5  # K rays per pixel (Deblur-NeRF synthetic)
     embed_dim: int = 32  # per-view embedding
@@ -99,37 +122,17 @@ class DeblurNerfOptions:
     lr_dsk: float = 1e-3
     lambda_align: float = 0.1  # pulls the first kernel point onto the pixel's own ray
 
+    def problems(self) -> list[str]:
+        out = super().problems()
+        if (self.kernel_points < 1 or self.embed_dim < 1 or self.dsk_width < 1 or self.dsk_depth < 2
+                or self.dsk_freqs < 0):  # fmt: skip
+            out.append("kernel_points, embed_dim, dsk_width >= 1, dsk_depth >= 2")
+        return out
+
 
 @dataclass(frozen=True)
-class E2NerfOptions:
-    """E²NeRF: N + 1 latent renders per pixel, blur loss on their mean and the pairwise event loss."""
+class E2NerfOptions(FieldOptions):
+    """The field's options and E²NeRF's: N + 1 latent renders per pixel, blur loss on their mean and the pairwise
+    event loss."""
 
     lambda_event: float = 0.001  # E²NeRF code's weight beside its MSE blur loss (../shared/docs/edi-and-events.md §4)
-
-
-@dataclass(frozen=True)
-class FieldSteps:
-    """The default budget (optimiser steps) of each field method: what ``eigs train`` uses when neither the run's
-    options nor ``--steps`` set ``steps`` (TrainConfig's 3000 is the Gaussian methods'). Set by the time budget, not
-    by a plateau: the four runs of a scene one after another (the workflow's 2 threads each) within the tables
-    issue's 15 minutes per scene, from the measured per-step cost (docs/results.md, "The NeRF columns"); the fields
-    are still improving at this budget."""
-
-    nerf: int = 800
-    deblur_nerf: int = 800
-    edi_nerf: int = 800
-    e2nerf: int = 800
-
-
-def field_default_steps(method: str) -> int:
-    """:class:`FieldSteps`' budget of the field method ``method`` (``deblur-nerf`` → ``deblur_nerf``)."""
-    return int(getattr(FieldSteps(), method.replace("-", "_")))
-
-
-def options_dict(*parts: Any) -> dict[str, Any]:
-    """The defaults of several option dataclasses as one mapping (tuples as lists, as JSON gives them)."""
-    out: dict[str, Any] = {}
-    for p in parts:
-        for k, v in asdict(p).items():
-            out[k] = list(v) if isinstance(v, tuple) else v
-    return out

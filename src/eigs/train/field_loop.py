@@ -31,9 +31,10 @@ from eigs.metrics.pixel import psnr_torch
 from eigs.render.field import render_image
 from eigs.train.config import TrainConfig
 from eigs.train.data import TrainData
-from eigs.train.field_methods import FieldMethod, make_field_method
+from eigs.train.field_methods import FieldMethod
 from eigs.train.field_model import FieldModel, field_box, lr_factor, voxel_schedule
 from eigs.train.loop import complete_run, log_csv, resume_from_partial, run_steps
+from eigs.train.plugins import make_field_method
 from eigs.util.atomic import atomic_path
 
 log = logging.getLogger(__name__)

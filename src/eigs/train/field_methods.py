@@ -13,11 +13,9 @@ one view) from the method's torch generator, so a resumed run draws the same ray
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
-from typing import Any, ClassVar
 
 import numpy as np
 import torch
@@ -26,12 +24,13 @@ from torch import Tensor, nn
 from eigs.errors import EigsError
 from eigs.losses.events import e2nerf_event_loss, from_linear, lin_log, luma, to_linear
 from eigs.render.field import pixel_rays, render_rays
+from eigs.train.catalog import method as method_spec
 from eigs.train.config import TrainConfig
 from eigs.train.data import TrainData
-from eigs.train.field_config import DeblurNerfOptions, E2NerfOptions, FieldOptions, options_dict
+from eigs.train.field_config import DeblurNerfOptions, E2NerfOptions, FieldOptions
 from eigs.train.field_model import FieldModel
-from eigs.train.method_inputs import needs_events
-from eigs.train.methods import warn_without_events
+from eigs.train.options import options_json
+from eigs.train.resolve import method_options
 
 
 @dataclass
@@ -42,69 +41,18 @@ class FieldStep:
     terms: dict[str, float]
 
 
-def _dataclass_from(cls: type, values: dict[str, Any], where: str) -> Any:
-    """An options dataclass from the method's options (the keys it has), types checked."""
-    kw: dict[str, Any] = {}
-    for f in dataclasses.fields(cls):
-        default = getattr(cls(), f.name)
-        v = values[f.name]
-        if isinstance(default, tuple):
-            if not isinstance(v, list | tuple) or not all(isinstance(x, int | float) for x in v):
-                raise EigsError(where, f"option {f.name} must be a list of numbers, got {v!r}")
-            v = tuple(float(x) for x in v)
-        elif isinstance(default, float) and isinstance(v, int) and not isinstance(v, bool):
-            v = float(v)
-        elif not isinstance(v, type(default)) or isinstance(v, bool) != isinstance(default, bool):
-            raise EigsError(where, f"option {f.name} must be {type(default).__name__}, got {v!r}")
-        kw[f.name] = v
-    return cls(**kw)
-
-
-def _check_field_options(o: FieldOptions, where: str) -> None:
-    checks = [
-        (o.batch_rays >= 1 and o.n_samples >= 1, "batch_rays and n_samples must be >= 1"),
-        (0 <= o.box_quantile < 0.5 and min(o.box_margin, o.box_camera_margin) >= 0,
-         "box_quantile must lie in [0, 0.5), box_margin and box_camera_margin >= 0"),
-        (8 <= o.voxels_start <= o.voxels_final, "need 8 <= voxels_start <= voxels_final"),
-        (all(0 < f <= 1 for f in o.grow_at) and list(o.grow_at) == sorted(o.grow_at), "grow_at: increasing in (0, 1]"),
-        (0 < o.alpha_init < 1 and 0 < o.occupancy_weight < 1, "alpha_init and occupancy_weight must lie in (0, 1)"),
-        (o.lr_grid >= 0 and 0 < o.lr_decay <= 1, "lr_grid must be >= 0 and lr_decay in (0, 1]"),
-        (min(o.tv_density, o.tv_colour, o.distortion, o.near) >= 0, "tv weights, distortion and near must be >= 0"),
-        (o.occupancy_every >= 1 and o.occupancy_start >= 0, "occupancy_every >= 1, occupancy_start >= 0"),
-        (o.core_ratio >= 1 and o.core_radius > 0, "core_ratio must be >= 1 and core_radius > 0"),
-        (o.field in ("grid", "grid+vm"), f"field must be 'grid' or 'grid+vm', got {o.field!r}"),
-        (8 <= o.vm_voxels_start <= o.vm_voxels_final, "need 8 <= vm_voxels_start <= vm_voxels_final"),
-        (o.vm_colour_channels >= 1 and o.vm_init_scale > 0 and o.density_scale > 0,
-         "vm_colour_channels >= 1, vm_init_scale and density_scale > 0"),
-        (min(o.lr_factors, o.lr_basis, o.vm_tv_colour) >= 0, "lr_factors, lr_basis and vm_tv_colour must be >= 0"),
-    ]
-    for ok, msg in checks:
-        if not ok:
-            raise EigsError(where, msg)
-
-
 class FieldMethod(ABC):
-    """Base class: validates ``method_options`` against ``OPTIONS`` (the field's and the method's own)."""
-
-    name: ClassVar[str] = ""
-    description: ClassVar[str] = ""
-    needs_events: ClassVar[bool] = False  # from eigs.train.method_inputs.EVENT_METHODS
-    OWN: ClassVar[tuple[type, ...]] = ()  # the method's own option dataclasses
-    OPTIONS: ClassVar[dict[str, Any]] = {}
-
-    def __init_subclass__(cls, **kw: Any) -> None:
-        super().__init_subclass__(**kw)
-        cls.OPTIONS = options_dict(FieldOptions(), *(c() for c in cls.OWN))
-        cls.needs_events = needs_events(cls.name)
+    """Base class. ``spec``: the method's catalog entry (:mod:`eigs.train.catalog`); ``field_opts``: its options (a
+    :class:`FieldOptions`, with the method's own fields for ``deblur-nerf`` and ``e2nerf``), checked; ``options``: the
+    same as JSON (what ``config.json`` records)."""
 
     def __init__(self, data: TrainData, cfg: TrainConfig, device: torch.device):
-        where = f"method {self.name}"
-        unknown = sorted(set(cfg.method_options) - set(self.OPTIONS))
-        if unknown:
-            raise EigsError(where, f"unknown option(s) {', '.join(unknown)}; known: {', '.join(self.OPTIONS)}")
-        self.options = {**self.OPTIONS, **cfg.method_options}
-        self.field_opts: FieldOptions = _dataclass_from(FieldOptions, self.options, where)
-        _check_field_options(self.field_opts, where)
+        self.spec = method_spec(cfg.method)
+        self.name, self.description = self.spec.name, self.spec.description
+        opts = method_options(cfg)
+        assert isinstance(opts, FieldOptions), f"{self.name}: field options must be FieldOptions"
+        self.field_opts: FieldOptions = opts
+        self.options = options_json(opts)
         self.data, self.cfg, self.device = data, cfg, device
         self.K = data.K.to(device)
         self.background = data.background.to(device)
@@ -151,28 +99,6 @@ class FieldMethod(ABC):
         """Restore what :meth:`state_dict` returned (nothing by default)."""
 
 
-FIELD_REGISTRY: dict[str, type[FieldMethod]] = {}
-
-
-def register_field(cls: type[FieldMethod]) -> type[FieldMethod]:
-    if not cls.name or cls.name in FIELD_REGISTRY:
-        raise ValueError(f"field method name {cls.name!r} empty or registered twice")
-    FIELD_REGISTRY[cls.name] = cls
-    return cls
-
-
-def is_field_method(name: str) -> bool:
-    return name in FIELD_REGISTRY
-
-
-def make_field_method(data: TrainData, cfg: TrainConfig, device: torch.device) -> FieldMethod:
-    cls = FIELD_REGISTRY.get(cfg.method)
-    if cls is None:
-        raise EigsError("train", f"{cfg.method!r} is not a field method; known: {', '.join(sorted(FIELD_REGISTRY))}")
-    warn_without_events(cls.name, cls.needs_events, data)
-    return cls(data, cfg, device)
-
-
 class ImageField(FieldMethod):
     """Rays of training images at their cameras, MSE against the pixels."""
 
@@ -199,19 +125,15 @@ class ImageField(FieldMethod):
         return FieldStep(mse, {"mse": mse.item()})
 
 
-@register_field
 class Nerf(ImageField):
-    name = "nerf"
-    description = "NeRF (voxel-grid field) on the blurry frames at the reference pose (latent k = 0)"
+    """``nerf``: rays of the blurry frames at the views' reference poses."""
 
     def samples(self) -> tuple[Tensor, Tensor]:
         return self.data.blurry[self.views], self.data.c2w[self.views, 0]
 
 
-@register_field
 class EdiNerf(ImageField):
-    name = "edi-nerf"
-    description = "EDI-NeRF: the field on the EDI latent sharp frames at their latent poses"
+    """``edi-nerf``: rays of the EDI latent frames at their latent poses."""
 
     def samples(self) -> tuple[Tensor, Tensor]:
         v, k = np.nonzero(self.data.valid)
@@ -226,15 +148,13 @@ def latent_poses(data: TrainData) -> Tensor:
     return c2w.to(torch.float32)
 
 
-@register_field
 class E2Nerf(FieldMethod):
-    name = "e2nerf"
-    description = "E²NeRF (voxel-grid field): N+1 latent renders per pixel, blur MSE on their mean + event loss"
-    OWN = (E2NerfOptions,)
+    """``e2nerf``: each pixel rendered at the N + 1 latent poses of its view, blur MSE + pairwise event loss."""
 
     def __init__(self, data: TrainData, cfg: TrainConfig, device: torch.device):
         super().__init__(data, cfg, device)
-        self.own: E2NerfOptions = _dataclass_from(E2NerfOptions, self.options, f"method {self.name}")
+        assert isinstance(self.field_opts, E2NerfOptions)
+        self.own: E2NerfOptions = self.field_opts
         if self.views.size == 0:
             raise EigsError(data.scene.name, f"method {self.name}: no view has a valid reference pose")
         self.c2w = latent_poses(data)
@@ -290,17 +210,13 @@ class KernelNet(nn.Module):
         return out.reshape(view.shape[0], self.o.kernel_points, 6)
 
 
-@register_field
 class DeblurNerf(FieldMethod):
-    name = "deblur-nerf"
-    description = "Deblur-NeRF (voxel-grid field): deformable sparse kernel of K rays per pixel from a per-view MLP"
-    OWN = (DeblurNerfOptions,)
+    """``deblur-nerf``: K rays per pixel moved by a per-view MLP (the DSK), their weighted mean against the pixel."""
 
     def __init__(self, data: TrainData, cfg: TrainConfig, device: torch.device):
         super().__init__(data, cfg, device)
-        o = _dataclass_from(DeblurNerfOptions, self.options, f"method {self.name}")
-        if o.kernel_points < 1 or o.embed_dim < 1 or o.dsk_width < 1 or o.dsk_depth < 2 or o.dsk_freqs < 0:
-            raise EigsError(f"method {self.name}", "kernel_points, embed_dim, dsk_width >= 1, dsk_depth >= 2")
+        o = self.field_opts
+        assert isinstance(o, DeblurNerfOptions)
         self.own: DeblurNerfOptions = o
         if self.views.size == 0:
             raise EigsError(data.scene.name, f"method {self.name}: no view has a valid reference pose")
@@ -348,7 +264,3 @@ class DeblurNerf(FieldMethod):
         align = dq[:, 0].abs().mean()
         loss = mse + o.lambda_align * align
         return FieldStep(loss, {"mse": mse.item(), "align": align.item()})
-
-
-def field_method_names() -> list[str]:
-    return sorted(FIELD_REGISTRY)

@@ -31,8 +31,9 @@ from eigs.errors import EigsError
 from eigs.metrics.pixel import psnr_torch
 from eigs.train.config import TrainConfig
 from eigs.train.data import HeldOut, TrainData
-from eigs.train.methods import Method, make_method
+from eigs.train.methods import Method
 from eigs.train.model import PARAM_NAMES, GaussianModel, make_optimizer, means_lr, scene_extent
+from eigs.train.plugins import make_method
 from eigs.train.strategy import DensifyStrategy
 from eigs.util.atomic import atomic_path
 from eigs.util.progress import progress

@@ -1,8 +1,9 @@
-"""The method registry: a method name → how one training step explains its target (what it renders, the loss).
+"""The Gaussian methods' base class: how one training step explains its target (what it renders, the loss), and the
+methods that render once per step (``3dgs``, ``edi-3dgs``, ``oracle``).
 
 Every method shares the model, optimiser, densification and budget of :mod:`eigs.train.loop`; a method only says
 which samples a step draws from and how it turns renders into a loss. Add a method by subclassing :class:`Method`
-and decorating it with :func:`register`.
+and adding its entry to :mod:`eigs.train.catalog` (docs/development.md).
 """
 
 from __future__ import annotations
@@ -10,7 +11,6 @@ from __future__ import annotations
 import logging
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
 
 import numpy as np
 import torch
@@ -18,10 +18,12 @@ from torch import Tensor
 
 from eigs.errors import EigsError
 from eigs.losses import photometric_loss
+from eigs.train.catalog import method as method_spec
 from eigs.train.config import TrainConfig
 from eigs.train.data import TrainData
-from eigs.train.method_inputs import needs_events
 from eigs.train.model import GaussianModel
+from eigs.train.options import options_json
+from eigs.train.resolve import method_options
 
 
 @dataclass
@@ -48,28 +50,15 @@ class StepOutput:
 
 
 class Method(ABC):
-    """Base class. ``options``: the method's own options (``TrainConfig.method_options``), validated against
-    ``OPTIONS`` (name → default). ``needs_events``: set from :data:`eigs.train.method_inputs.EVENT_METHODS` (the
-    one source the workflow reads too)."""
-
-    name: ClassVar[str] = ""
-    description: ClassVar[str] = ""
-    needs_ground_truth: ClassVar[bool] = False
-    needs_events: ClassVar[bool] = False
-    OPTIONS: ClassVar[dict[str, Any]] = {}
-
-    def __init_subclass__(cls, **kw: Any) -> None:
-        super().__init_subclass__(**kw)
-        cls.needs_events = needs_events(cls.name)
+    """Base class. ``spec``: the method's catalog entry (:mod:`eigs.train.catalog`); ``opts``: its options (the
+    catalog's recipe with ``TrainConfig.method_options`` over it, checked); ``options``: the same as JSON (what
+    ``config.json`` records)."""
 
     def __init__(self, data: TrainData, cfg: TrainConfig, device: torch.device):
-        unknown = sorted(set(cfg.method_options) - set(self.OPTIONS))
-        if unknown:
-            raise EigsError(
-                f"method {self.name}",
-                f"unknown option(s) {', '.join(unknown)}; known: {', '.join(self.OPTIONS) or 'none'}",
-            )
-        self.options = {**self.OPTIONS, **cfg.method_options}
+        self.spec = method_spec(cfg.method)
+        self.name, self.description = self.spec.name, self.spec.description
+        self.opts = method_options(cfg)
+        self.options = options_json(self.opts)
         self.data = data
         self.cfg = cfg
         self.device = device
@@ -108,33 +97,6 @@ class Method(ABC):
         """Restore what :meth:`state_dict` returned (nothing by default)."""
 
 
-REGISTRY: dict[str, type[Method]] = {}
-
-
-def register(cls: type[Method]) -> type[Method]:
-    if not cls.name or cls.name in REGISTRY:
-        raise ValueError(f"method name {cls.name!r} empty or registered twice")
-    REGISTRY[cls.name] = cls
-    return cls
-
-
-def _load_all() -> None:
-    """Import the modules that register methods beyond this one's."""
-    import eigs.train.camera_motion  # noqa: F401
-    import eigs.train.deblur  # noqa: F401
-
-
-def make_method(data: TrainData, cfg: TrainConfig, device: torch.device) -> Method:
-    _load_all()
-    cls = REGISTRY.get(cfg.method)
-    if cls is None:
-        raise EigsError("train", f"unknown method {cfg.method!r}; known: {', '.join(sorted(REGISTRY))}")
-    if cls.needs_ground_truth and data.sharp_train is None:
-        raise EigsError(data.scene.name, f"method {cfg.method} needs ground-truth sharp images of the training views")
-    warn_without_events(cls.name, cls.needs_events, data)
-    return cls(data, cfg, device)
-
-
 def warn_without_events(method: str, reads_events: bool, data: TrainData) -> None:
     """Log a warning when a method that reads events trains on an EDI artifact without any (a scene without events,
     or ``eigs edi --no-events``: every latent frame is the blurry frame; the workflow does not schedule such runs)."""
@@ -167,57 +129,26 @@ class ImageMethod(Method):
         return self.photometric_step(model, self.c2w[sample], self.images[sample], sh_degree)
 
 
-@register
 class Blurry3DGS(ImageMethod):
-    name = "3dgs"
-    description = "3D Gaussian Splatting on the blurry frames at the reference pose (latent k = 0)"
+    """``3dgs``: the blurry frames at the reference pose (latent k = 0)."""
 
     def samples(self) -> tuple[Tensor, Tensor]:
         views = self.data.reference_views()
         return self.data.blurry[views], self.data.c2w[views, 0]
 
 
-@register
 class Edi3DGS(ImageMethod):
-    name = "edi-3dgs"
-    description = "3DGS on the EDI latent sharp frames at their latent poses (the analogue of EDI-NeRF)"
+    """``edi-3dgs``: the EDI latent sharp frames at their latent poses."""
 
     def samples(self) -> tuple[Tensor, Tensor]:
         v, k = np.nonzero(self.data.valid)
         return self.data.latent[v, k], self.data.c2w[v, k]
 
 
-@register
 class Oracle(ImageMethod):
-    name = "oracle"
-    description = "upper bound: the ground-truth sharp images of the training views at their reference pose"
-    needs_ground_truth = True
+    """``oracle``: the ground-truth sharp images of the training views at their reference pose."""
 
     def samples(self) -> tuple[Tensor, Tensor]:
         d = self.data
         views = np.nonzero(d.valid[:, 0] & d.has_sharp_train)[0]
         return d.sharp_train[views], d.c2w[views, 0]  # type: ignore[index]
-
-
-def method_names() -> list[str]:
-    """Every method a run may name: the Gaussian ones of :data:`REGISTRY` and the radiance-field ones of
-    :data:`eigs.train.field_methods.FIELD_REGISTRY`."""
-    from eigs.train.field_methods import FIELD_REGISTRY
-
-    _load_all()
-    return sorted({*REGISTRY, *FIELD_REGISTRY})
-
-
-def method_needs_events(name: str) -> bool:
-    """The ``needs_events`` of a registered method (Gaussian or radiance field)."""
-    from eigs.train.field_methods import FIELD_REGISTRY
-
-    _load_all()
-    return (REGISTRY.get(name) or FIELD_REGISTRY[name]).needs_events
-
-
-def method_description(name: str) -> str:
-    from eigs.train.field_methods import FIELD_REGISTRY
-
-    _load_all()
-    return (REGISTRY.get(name) or FIELD_REGISTRY[name]).description

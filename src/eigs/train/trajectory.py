@@ -20,7 +20,7 @@ import math
 import torch
 from torch import Tensor
 
-MODES = ("linear", "cubic", "bezier")
+from eigs.train.method_options import control_problem
 
 
 def _skew(w: Tensor) -> Tensor:
@@ -59,22 +59,18 @@ def se3_exp(xi: Tensor) -> Tensor:
 
 def curve_weights(mode: str, n_control: int, u: Tensor) -> Tensor:
     """Weights (U, K) of the K control twists at the times ``u`` (U,) in [0, 1]; each row sums to 1, so a curve
-    whose control twists are all equal is constant."""
+    whose control twists are all equal is constant. A mode (:data:`eigs.train.method_options.MODES`) or control
+    count that do not fit raise ValueError."""
+    problem = control_problem(mode, n_control)
+    if problem:
+        raise ValueError(problem)
     u = u.to(torch.float64)
     if mode == "linear":
-        if n_control != 2:
-            raise ValueError("a linear trajectory has 2 control twists")
         return torch.stack([1 - u, u], -1)
     if mode == "cubic":  # uniform cubic B-spline segment over 4 knots (BAD-Gaussians' "cubic")
-        if n_control != 4:
-            raise ValueError("a cubic B-spline trajectory has 4 control twists")
         return torch.stack([(1 - u) ** 3, 3 * u**3 - 6 * u**2 + 4, -3 * u**3 + 3 * u**2 + 3 * u + 1, u**3], -1) / 6
-    if mode == "bezier":
-        if n_control < 2:
-            raise ValueError("a Bézier trajectory has at least 2 control twists")
-        n = n_control - 1
-        return torch.stack([math.comb(n, i) * u**i * (1 - u) ** (n - i) for i in range(n_control)], -1)
-    raise ValueError(f"trajectory mode must be one of {MODES}, got {mode!r}")
+    n = n_control - 1  # Bézier
+    return torch.stack([math.comb(n, i) * u**i * (1 - u) ** (n - i) for i in range(n_control)], -1)
 
 
 def fit_controls(mode: str, n_control: int, u: Tensor, xi: Tensor, reg: float = 1e-6) -> Tensor:

@@ -1,0 +1,169 @@
+"""The method catalog (eigs.train.catalog) and the one options validator (eigs.train.resolve): no torch, no import
+circle in train/, a new method is one entry plus one class, and every config's runs resolve to the options they had
+before the catalog (tests/train/data/resolved_runs.json, written by the code of 5f548ef)."""
+
+from __future__ import annotations
+
+import ast
+import json
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+import yaml
+
+from eigs.cli import main
+from eigs.errors import EigsError
+from eigs.tables.rows import table_rows
+from eigs.train import catalog
+from eigs.train.catalog import GAUSSIAN, METHODS, MethodSpec, method_class, register
+from eigs.train.method_options import MultiRenderOptions
+from eigs.train.methods import Method
+from eigs.train.options import Options, options_json
+from eigs.train.resolve import check_run, check_runs, method_options, train_config
+
+REPO = Path(__file__).resolve().parents[2]
+TRAIN = REPO / "src" / "eigs" / "train"
+
+
+def train_imports(path: Path) -> set[str]:
+    """The modules of eigs.train that a file of it imports (``from eigs.train import x`` counts as ``x``)."""
+    out = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        names = []
+        if isinstance(node, ast.Import):
+            names = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.module:
+            names = [node.module] + [f"{node.module}.{a.name}" for a in node.names]
+        out |= {
+            n.split(".")[2] for n in names if n.startswith("eigs.train.") and (TRAIN / f"{n.split('.')[2]}.py").exists()
+        }
+    return out - {path.stem}
+
+
+def test_train_has_no_import_circle():
+    graph = {p.stem: train_imports(p) for p in TRAIN.glob("*.py")}
+    state: dict[str, int] = {}  # 1 on the stack, 2 done
+
+    def visit(node: str, stack: list[str]) -> None:
+        state[node] = 1
+        for nxt in sorted(graph.get(node, ())):
+            assert state.get(nxt) != 1, f"import circle: {' → '.join([*stack, node, nxt])}"
+            if nxt not in state:
+                visit(nxt, [*stack, node])
+        state[node] = 2
+
+    for node in sorted(graph):
+        if node not in state:
+            visit(node, [])
+
+
+def test_catalog_and_resolver_import_no_torch():
+    code = "import eigs.train.catalog, eigs.train.resolve, eigs.tables.rows, sys; assert 'torch' not in sys.modules"
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False)
+    assert proc.returncode == 0, proc.stderr
+
+
+def test_every_entry_loads_its_class_and_its_recipe():
+    for name, spec in METHODS.items():
+        assert issubclass(method_class(name), Method) == (spec.family == GAUSSIAN), name
+        assert isinstance(spec.defaults(), spec.options), name
+    assert options_json(METHODS["eigs-b"].defaults()) == {**options_json(MultiRenderOptions()), "consistency": False}
+
+
+def test_defaults_agree_with_the_losses():
+    from eigs.losses.consistency import DEFAULT_DELTA, DEFAULT_REG
+
+    o = MultiRenderOptions()
+    assert (o.huber_delta, o.consis_reg) == (DEFAULT_DELTA, DEFAULT_REG)
+
+
+def resolved_runs() -> list[tuple[str, str, dict]]:
+    out = []
+    for path in sorted((REPO / "config").glob("*.yaml")):
+        runs = (yaml.safe_load(path.read_text()) or {}).get("runs") or {}
+        out += [(path.name, run, spec) for run, spec in sorted(runs.items())]
+    return out
+
+
+def test_every_config_run_resolves_as_before():
+    """TrainConfig, the method options with their defaults, and the JSON rule train passes (train_config_json)."""
+    snapshot = json.loads((Path(__file__).parent / "data" / "resolved_runs.json").read_text())
+    runs = resolved_runs()
+    assert {(f, r) for f, r, _ in runs} == {(f, r) for f, runs in snapshot.items() for r in runs}
+    for name, run, spec in runs:
+        check_run(run, spec)
+        text = json.dumps({"method": spec["method"], **spec.get("options", {})}, sort_keys=True, separators=(",", ":"))
+        cfg = train_config(json.loads(text), "--config")
+        got = {"config_json": text, "train": cfg.to_dict(), "method_options": options_json(method_options(cfg))}
+        assert json.dumps(got, sort_keys=True) == json.dumps(snapshot[name][run], sort_keys=True), (name, run)
+
+
+@pytest.mark.parametrize(
+    ("spec", "words"),
+    [
+        ({"method": "eigs", "options": {"method_options": {"lamda_event": 1}}}, ["lamda_event", "accepted: ade,"]),
+        ({"method": "eigs", "options": {"stepz": 5}}, ["stepz", "accepted: method, steps,"]),
+        ({"method": "nerf", "options": {"method_options": {"kernel_points": 3}}}, ["kernel_points", "batch_rays"]),
+        ({"method": "besplat", "options": {"method_options": {"mode": "spline"}}}, ["mode must be one of"]),
+        ({"method": "eigs", "options": {"method_options": {"width": 2.5}}}, ["option width must be int"]),
+        ({"method": "nope"}, ["unknown method 'nope'"]),
+        ({"method": "eigs", "option": {}}, ["unknown key(s) option", "accepted: method, bins, options, scenes"]),
+    ],
+)
+def test_a_bad_run_is_one_line_naming_the_run_and_the_key(spec, words):
+    with pytest.raises(EigsError) as err:
+        check_runs({"my-run": spec})
+    msg = str(err.value)
+    assert "\n" not in msg and "my-run" in msg and all(w in msg for w in words), msg
+
+
+def test_table1_rows_keep_their_order():
+    assert list(table_rows()["table1"].items()) == [(k, k) for k in (
+        "nerf", "deblur-nerf", "edi-nerf", "e2nerf", "3dgs", "deblurring-gs", "deblurring-gs+", "e2gs", "evagaussians",
+        "besplat", "bad-gaussians", "eigs", "eigs-literal", "eigs+", "edi-3dgs", "oracle")]  # fmt: skip
+
+
+def test_a_new_method_is_one_entry_and_one_class(tmp_path, monkeypatch, capsys):
+    (tmp_path / "toy_method.py").write_text(
+        textwrap.dedent("""
+        from dataclasses import dataclass
+        from eigs.train.methods import Method
+        from eigs.train.options import Options
+
+        @dataclass(frozen=True)
+        class ToyOptions(Options):
+            gain: float = 1.0
+
+            def problems(self):
+                return [] if self.gain > 0 else ["gain must be > 0"]
+
+        class Toy(Method):
+            def n_samples(self):
+                return 1
+
+            def step(self, model, sample, step, sh_degree):
+                raise NotImplementedError
+    """)
+    )
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setattr(catalog, "METHODS", dict(METHODS))
+    import eigs.tables.rows as rows
+
+    monkeypatch.setattr(rows, "METHODS", catalog.METHODS)
+    toy_options = __import__("toy_method").ToyOptions
+    register(MethodSpec("toy", GAUSSIAN, "toy_method:Toy", toy_options, "a throwaway method", steps=7))
+    assert main(["train", "--list"]) == 0
+    assert "toy              a throwaway method" in capsys.readouterr().out
+    cfg = check_run("toy-run", {"method": "toy", "options": {"method_options": {"gain": 2}}})
+    assert cfg.steps == 7 and method_options(cfg) == toy_options(gain=2.0)
+    with pytest.raises(EigsError, match="toy-run.*unknown option.*gian; accepted: gain"):
+        check_run("toy-run", {"method": "toy", "options": {"method_options": {"gian": 2}}})
+    with pytest.raises(EigsError, match="gain must be > 0"):
+        check_run("toy-run", {"method": "toy", "options": {"method_options": {"gain": 0}}})
+    assert table_rows()["table1"]["toy"] == "toy"
+    assert method_class("toy").__name__ == "Toy" and issubclass(method_class("toy"), Method)
+    assert catalog.METHODS["toy"].model_file == "model.ply" and isinstance(toy_options(), Options)
+    assert "toy" not in METHODS  # the real catalog is untouched
