@@ -274,7 +274,7 @@ def skips(d: Path, facts: dict, fig: Path) -> str:
         "scene without events (`events: false`): no event stages",
         f"an `edi_frames` job (`eigs edi --no-events`: every view passed through as sharp, no binning or threshold "
         f"search) instead of `edi`, and the training and evaluation jobs of the runs whose method needs events "
-        f"(eigs.train.method_inputs; {names}) not scheduled on that scene ({facts.get('frames_only', '?')} such "
+        f"(eigs.train.catalog; {names}) not scheduled on that scene ({facts.get('frames_only', '?')} such "
         f"scene(s) of this config): EDI {s(edi_s)}, their training "
         + (s(ev_train) if ev_train is not None else f"not measured ({', '.join(unmeasured) or 'no such run'})"),
         None if edi_s is None else edi_s + (ev_train or 0.0),
