@@ -146,15 +146,11 @@ def in_ledger(ledger: Path, job: Job) -> bool:
 
 def expected_train(cfg: dict, run: str) -> dict:
     """The ``train`` section of the config.json of a run trained with ``cfg``'s options for ``run``, as `eigs train`
-    resolves them (TrainConfig's defaults; a field method's own budget when the options set no ``steps``)."""
-    from eigs.train.cli import resolve_steps
-    from eigs.train.config import TrainConfig
+    resolves them (TrainConfig's defaults; the method's own budget when the options set no ``steps``)."""
+    from eigs.train.resolve import train_config
 
     spec = cfg["runs"][run]
-    given = {"method": spec["method"], **spec.get("options", {})}
-    values = TrainConfig.from_dict(given).to_dict()
-    values["steps"] = resolve_steps(values, given, None)
-    return values
+    return train_config({"method": spec["method"], **spec.get("options", {})}).to_dict()
 
 
 def option_changes(root: Path, cfg: dict, job: Job) -> str:
