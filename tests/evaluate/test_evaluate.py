@@ -107,7 +107,28 @@ def test_no_ground_truth_scores_brisque_on_training_views_and_a_path(tmp_path, c
     assert cli_mean(capsys, "brisque", r / "train") == pytest.approx(m["train"]["brisque"], abs=1e-6)
     assert cli_mean(capsys, "brisque", r / "path") == pytest.approx(m["path"]["brisque"], abs=1e-6)
     assert m["all"]["brisque"] == pytest.approx((3 * m["train"]["brisque"] + 6 * m["path"]["brisque"]) / 9, abs=1e-9)
-    assert "novel" not in m and "blur" not in m
+    assert "novel" not in m and "blur" not in m and doc["hidden_ground_truth"] is False
+
+
+def test_hidden_ground_truth_scores_both_the_test_cameras_and_brisque(tmp_path, capsys, resources_dir):
+    """A recording through the real-data path with its ground truth kept aside (config/davis346.yaml): the test
+    cameras against the ground truth as for any synthetic scene, and BRISQUE as for a scene without one."""
+    case = make_case(tmp_path)
+    out = tmp_path / "eval" / "metrics.json"
+    code = main(["evaluate", str(case["run"]), str(case["scene"]), str(case["sfm"]), "-o", str(out), "--resources",
+                 str(resources_dir), "--path-frames", "6", "--hidden-ground-truth"])  # fmt: skip
+    assert code == 0
+    doc = json.loads(out.read_text())
+    assert doc["ground_truth"] is True and doc["hidden_ground_truth"] is True
+    m = doc["metrics"]
+    assert set(m) == {"blur", "novel", "train", "path", "all"} and m["novel"]["n"] == 2 and m["all"]["n"] == 9
+    assert doc["frames_timed"] == 4  # FPS over the test cameras, as for every scene with ground truth
+    r = out.parent / "renders"
+    assert cli_mean(capsys, "brisque", r / "path") == pytest.approx(m["path"]["brisque"], abs=1e-6)
+    assert cli_mean(capsys, "psnr", r / "novel", r / "gt_novel") == pytest.approx(m["novel"]["psnr"], abs=1e-4)
+    assert doc["path"] == {"kind": "ellipse", "frames": 6}
+    sets = [row["set"] for row in csv.DictReader((out.parent / "per_image.csv").open())]
+    assert sets == ["blur"] * 2 + ["novel"] * 2 + ["train"] * 3 + ["path"] * 6
 
 
 def test_missing_run_config_is_a_clear_error(tmp_path):

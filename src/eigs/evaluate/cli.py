@@ -18,6 +18,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("-o", "--output", required=True, help="metrics.json to write")
     p.add_argument("--path-frames", type=int, default=None, help="render-path frames (ellipse or orbit) scored on "
                    "scenes without ground truth (default 120)")  # fmt: skip
+    p.add_argument("--hidden-ground-truth", action="store_true", help="the scene is a recording through the "
+                   "real-data path whose ground truth was kept aside for scoring (ingested with --groundtruth): "
+                   "score BRISQUE (training views, path) as well as the test cameras")  # fmt: skip
     p.add_argument("--resources", default=None, metavar="DIR", help="model files made by `eigs resources`")
     p.add_argument("--device", default="auto", choices=("auto", "cpu", "cuda"))
 
@@ -32,7 +35,8 @@ def run(args: argparse.Namespace) -> int:
     if frames < 0:
         raise EigsError("--path-frames", "must be >= 0")
     res = evaluate_run(args.run, args.scene, args.sfm, args.output, resources=args.resources,
-                       path_frames=frames, device=args.device)  # fmt: skip
+                       path_frames=frames, device=args.device,
+                       hidden_ground_truth=args.hidden_ground_truth)  # fmt: skip
     m = res["metrics"]
     summary = ", ".join(
         f"{k}: " + " ".join(f"{n}={v:.4g}" for n, v in g.items() if isinstance(v, float)) for k, g in m.items()

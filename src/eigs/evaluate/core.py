@@ -5,11 +5,12 @@ SSIM in every lineage (:data:`eigs.metrics.pixel.SSIM_MODES`) and LPIPS-alex are
 separately for blur views (kind 0: a training view's ground truth at its first latent time, the reference pose) and
 novel views (kind 1). Cameras come only from ``test_cameras.h5`` (docs/sfm.md, "Test cameras").
 
-Scenes without ground truth: BRISQUE of renders at the training views' reference poses (latent k = 0 of
-``poses.h5``) and on a render path (:func:`eigs.util.cameras.render_path`: an ellipse across the viewing direction
-for forward-facing captures, else an orbit), as E²NeRF's real protocol (blur views plus a render path). An image
-whose BRISQUE is undefined (e.g. constant: a path frame that misses the scene) is counted in ``brisque_undefined``
-and left out of the mean, never scored silently.
+Scenes without ground truth (and, with ``hidden_ground_truth``, simulated recordings through the real-data path
+whose ground truth was kept aside for scoring, beside their test-camera scores): BRISQUE of renders at the training
+views' reference poses (latent k = 0 of ``poses.h5``) and on a render path (:func:`eigs.util.cameras.render_path`:
+an ellipse across the viewing direction for forward-facing captures, else an orbit), as E²NeRF's real protocol
+(blur views plus a render path). An image whose BRISQUE is undefined (e.g. constant: a path frame that misses the
+scene) is counted in ``brisque_undefined`` and left out of the mean, never scored silently.
 
 Every run also reports training seconds and steps (``config.json``), the number of Gaussians (``n_voxels`` for a
 field run, whose ``n_gaussians`` is null) and the test-time frames per second (render only, after a warm-up render).
@@ -81,12 +82,16 @@ def evaluate_run(
     resources: str | None = None,
     path_frames: int = DEFAULT_PATH_FRAMES,
     device: str = "auto",
+    hidden_ground_truth: bool = False,
 ) -> dict[str, Any]:
     """Evaluate ``run_dir``; write ``output`` (metrics.json), ``per_image.csv`` and ``renders/`` beside it.
 
     Returns the metrics document (also written). Layout of ``renders/``: synthetic scenes ``blur/``, ``novel/``
     (renders) and ``gt_blur/``, ``gt_novel/`` (ground truth), files ``{row:04d}.png`` with the row of the image in
     the scene's ``gt/sharp``; other scenes ``train/{view:04d}.png`` and ``path/{i:04d}.png``.
+    ``hidden_ground_truth``: the scene is a recording through the real-data path whose ground truth was kept aside
+    for scoring (``config/davis346.yaml``): both are scored, the test cameras and the BRISQUE sets, and the
+    metrics say so (``hidden_ground_truth``).
     """
     import torch
 
@@ -94,7 +99,6 @@ def evaluate_run(
     from eigs.evaluate.renderer import CloudTensors, load_model, render_uint8
     from eigs.scene import read_scene
     from eigs.util.atomic import atomic_path
-    from eigs.util.cameras import render_path
     from eigs.util.image import write_png
 
     run_dir, sfm_dir, output = Path(run_dir), Path(sfm_dir), Path(output)
@@ -137,43 +141,12 @@ def evaluate_run(
                                  "camera": METHODS.get(int(tc.method[i]), "?"), **s})  # fmt: skip
                 if per:
                     groups[name] = {"n": len(per), **{k: _mean([p[k] for p in per]) for k in per[0]}}
-        else:
-            from eigs.metrics.noreference import brisque
-
-            valid = poses.valid[:, 0]
-            if not valid.any():
+        if not has_gt or hidden_ground_truth:
+            if not poses.valid[:, 0].any():
                 raise EigsError(sfm_dir, "no training view has a valid reference pose (latent k = 0)")
-            views = np.nonzero(valid)[0]
-            path, path_kind = render_path(poses.c2w[valid, 0], path_frames)
-            sets = {
-                "train": (poses.c2w[valid, 0], [f"{v:04d}.png" for v in views]),
-                "path": (path, [f"{i:04d}.png" for i in range(path_frames)]),
-            }
-            for name, (c2w, names) in sets.items():
-                if len(c2w) == 0:
-                    continue
-                ks = np.repeat(np.asarray(poses.K)[None], len(c2w), axis=0)
-                images, t = render_uint8(g, c2w, ks, w, h, bg)
-                times += t
-                scores, undefined = [], 0
-                for img, fname in zip(images, names, strict=True):
-                    write_png(tmp / name / fname, img)
-                    try:
-                        b = brisque(img, resources)
-                    except EigsError as err:
-                        if "model" in str(err).lower() or "resources" in str(err).lower():
-                            raise
-                        undefined += 1
-                        log.warning("%s/%s: BRISQUE undefined (%s); left out of the mean", name, fname, err)
-                        b = math.nan
-                    else:
-                        scores.append(b)
-                    rows.append({"set": name, "image": fname, "brisque": b})
-                groups[name] = {"n": len(images), "brisque": _mean(scores), "brisque_undefined": undefined}
-            all_scores = [r["brisque"] for r in rows if math.isfinite(r["brisque"])]
-            groups["all"] = {"n": len(rows), "brisque": _mean(all_scores),
-                             "brisque_undefined": len(rows) - len(all_scores)}  # fmt: skip
-            if not all_scores:
+            t, path_kind = _score_brisque(g, poses, w, h, bg, path_frames, tmp, resources, rows, groups)
+            times = times or t
+            if not any(math.isfinite(r.get("brisque", math.nan)) for r in rows):
                 log.warning("BRISQUE is undefined for every render of %s", run_dir)
 
     fps = len(times) / sum(times) if times and sum(times) > 0 else math.nan
@@ -195,6 +168,7 @@ def evaluate_run(
         "scene": scene.name,
         "bins": int(poses.n_latent - 1),
         "ground_truth": bool(has_gt),
+        "hidden_ground_truth": bool(hidden_ground_truth),
         "ssim_table_mode": SSIM_TABLE_MODE,
         "lpips_net": LPIPS_NET,
         "metrics": metrics,
@@ -211,7 +185,7 @@ def evaluate_run(
         "test_cameras": (
             {v: int(np.sum(tc.method == k)) for k, v in METHODS.items()} if has_gt and tc is not None else None
         ),
-        "path": None if has_gt else {"kind": path_kind, "frames": int(path_frames)},
+        "path": {"kind": path_kind, "frames": int(path_frames)} if path_kind else None,
         "motion": motion_metrics(run_dir, scene, poses.timestamps_us),
     }
     with atomic_path(output.parent / "per_image.csv") as tmp:
@@ -219,6 +193,61 @@ def evaluate_run(
     with atomic_path(output) as tmp:
         tmp.write_text(json.dumps(result, indent=2, allow_nan=False) + "\n")
     return result
+
+
+def _score_brisque(
+    g: Any,
+    poses: Any,
+    w: int,
+    h: int,
+    bg: np.ndarray,
+    path_frames: int,
+    tmp: Path,
+    resources: str | None,
+    rows: list[dict[str, Any]],
+    groups: dict[str, dict[str, Any]],
+) -> tuple[list[float], str]:
+    """BRISQUE of renders at the training views' reference poses (``train``) and on a render path (``path``), and
+    of both (``all``): PNGs under ``tmp``, rows and groups appended. Returns (render seconds, path kind)."""
+    from eigs.evaluate.renderer import render_uint8
+    from eigs.metrics.noreference import brisque
+    from eigs.util.cameras import render_path
+    from eigs.util.image import write_png
+
+    valid = poses.valid[:, 0]
+    views = np.nonzero(valid)[0]
+    path, path_kind = render_path(poses.c2w[valid, 0], path_frames)
+    sets = {
+        "train": (poses.c2w[valid, 0], [f"{v:04d}.png" for v in views]),
+        "path": (path, [f"{i:04d}.png" for i in range(path_frames)]),
+    }
+    times: list[float] = []
+    mine: list[dict[str, Any]] = []
+    for name, (c2w, names) in sets.items():
+        if len(c2w) == 0:
+            continue
+        ks = np.repeat(np.asarray(poses.K)[None], len(c2w), axis=0)
+        images, t = render_uint8(g, c2w, ks, w, h, bg)
+        times += t
+        scores, undefined = [], 0
+        for img, fname in zip(images, names, strict=True):
+            write_png(tmp / name / fname, img)
+            try:
+                b = brisque(img, resources)
+            except EigsError as err:
+                if "model" in str(err).lower() or "resources" in str(err).lower():
+                    raise
+                undefined += 1
+                log.warning("%s/%s: BRISQUE undefined (%s); left out of the mean", name, fname, err)
+                b = math.nan
+            else:
+                scores.append(b)
+            mine.append({"set": name, "image": fname, "brisque": b})
+        groups[name] = {"n": len(images), "brisque": _mean(scores), "brisque_undefined": undefined}
+    all_scores = [r["brisque"] for r in mine if math.isfinite(r["brisque"])]
+    groups["all"] = {"n": len(mine), "brisque": _mean(all_scores), "brisque_undefined": len(mine) - len(all_scores)}
+    rows += mine
+    return times, path_kind
 
 
 def motion_metrics(run_dir: Path, scene: Any, timestamps_us: np.ndarray) -> dict[str, Any] | None:
