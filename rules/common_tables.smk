@@ -13,13 +13,22 @@ def eval_targets():
 def evaluate_options(wildcards):
     """`eigs evaluate` flags from the `evaluate:` config section (unset options keep the CLI's defaults)."""
     e = config.get("evaluate", {})
-    return f"--path-frames {int(e['path_frames'])}" if "path_frames" in e else ""
+    out = [f"--path-frames {int(e['path_frames'])}"] if "path_frames" in e else []
+    if plan.scene_hidden_ground_truth(config, wildcards.scene):
+        out.append("--hidden-ground-truth")  # BRISQUE beside the test cameras (config/davis346.yaml)
+    return " ".join(out)
 
 
 # --- tables and figures ---------------------------------------------------------------------------------------
 TABLE_ROWS = table_rows(config.get("tables"))
 # Tables I-V always; an optional table (the ladder, config/ladder.yaml) where its runs are configured
 TABLE_NAMES = list(configured_rows(config.get("tables"), RUNS))
+# the BRISQUE-versus-PSNR rank agreement (eigs.tables.agreement), where an evaluated scene hides its ground truth
+EXTRA_TABLES = (
+    ["brisque_rank"]
+    if any(plan.scene_hidden_ground_truth(config, s) for run in RUNS for s in run_scenes(run))
+    else []
+)
 
 
 def tables_json():

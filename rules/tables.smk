@@ -14,6 +14,7 @@ rule tables:
         ),
         md=expand("results/tables/{t}.md", t=TABLE_NAMES),
         tex=expand("results/tables/{t}.tex", t=TABLE_NAMES),
+        extra=expand("results/tables/{t}.{ext}", t=EXTRA_TABLES, ext=("csv", "md")),
         all_md="results/tables/tables.md",
         per_scene="results/tables/per_scene.csv",
     params:

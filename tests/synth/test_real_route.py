@@ -43,6 +43,10 @@ def test_davis346_config_plans(tmp_path):
         assert gt == f"results/{name}/groundtruth.h5" and not gt.startswith(s["source"] + "/")
         assert f"--groundtruth {gt}" in out  # the ingest command merges it
     assert cfg["sfm"]["mode"] == "colmap" and cfg["sfm"]["allow_given"] is False
+    # evaluation scores BRISQUE beside the hidden ground truth; the tables add the rank agreement
+    evals = [line for line in out.splitlines() if line.startswith("Shell command: eigs evaluate")]
+    assert len(evals) == n_scenes * n_runs and all("--hidden-ground-truth" in e for e in evals)
+    assert "results/tables/brisque_rank.md" in out and "results/tables/brisque_rank.csv" in out
 
 
 def test_command_line_route_toy(tmp_path):
