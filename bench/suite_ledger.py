@@ -390,6 +390,7 @@ def tables(cfg: dict, ledger: Path) -> list[str]:
     saying what was written."""
     from eigs.cli import main as eigs_main
     from eigs.errors import EigsError
+    from eigs.tables.agreement import hidden_truth_scenes
     from eigs.tables.collect import summarise
     from eigs.tables.figures import pareto_plot, time_curves
     from eigs.tables.rows import configured_rows
@@ -409,6 +410,8 @@ def tables(cfg: dict, ledger: Path) -> list[str]:
         runs = summarise(metrics)
     except EigsError as err:
         raise LedgerError(str(err)) from None
+    if hidden_truth_scenes(runs):
+        lines.append(f"{ledger / 'tables' / 'brisque_rank.md'}: BRISQUE's rank agreement with PSNR")
     # the metrics' run_dir is relative to the workflow directory: here, to the ledger
     for s in runs.values():
         for d in s.per_scene.values():

@@ -2,8 +2,10 @@
 
 A run's synthetic metrics (PSNR / SSIM / LPIPS) are means over the scenes with ground truth, at the novel views
 (``novel``; the paper's Table I is most likely a novel-view evaluation) and the blur views (``blur``); BRISQUE is the
-mean over the scenes without ground truth (the ``all`` group: training views and orbit); training seconds, test-time
-FPS and Gaussians are means over every scene of the run. ``sources`` lists the run folders behind the numbers.
+mean over the scenes without ground truth (the ``all`` group: training views and orbit), ``brisque_sim`` the same
+over the simulated recordings through the real-data path whose ground truth was hidden from training
+(``hidden_ground_truth``: they count among the scenes with ground truth too); training seconds, test-time FPS and
+Gaussians are means over every scene of the run. ``sources`` lists the run folders behind the numbers.
 """
 
 from __future__ import annotations
@@ -31,6 +33,8 @@ SYNTHETIC_COLUMNS = {
     "lpips_blur": ("blur", "lpips_alex"),
 }
 REAL_COLUMNS = {"brisque": ("all", "brisque")}
+# BRISQUE of the scenes with a hidden ground truth (metrics.json ``hidden_ground_truth``), kept apart from real ones
+HIDDEN_COLUMNS = {"brisque_sim": ("all", "brisque")}
 RUN_COLUMNS = {"time_s": "train_seconds", "fps": "fps", "n_gaussians": "n_gaussians"}
 # the motion within the exposure against the ground truth (metrics.json ``motion``, eigs.metrics.motion): means over
 # the scenes where the run models motion and the scene has ground-truth poses
@@ -60,11 +64,9 @@ class RunSummary:
         for scene, d in self.per_scene.items():
             if col in RUN_COLUMNS:
                 v = d.get(RUN_COLUMNS[col])
-            elif col in {**SYNTHETIC_COLUMNS, **REAL_COLUMNS}:
-                grp, key = {**SYNTHETIC_COLUMNS, **REAL_COLUMNS}[col]
-                v = d["metrics"].get(grp, {}).get(key)
             else:
-                v = None
+                spec = SYNTHETIC_COLUMNS.get(col) or (HIDDEN_COLUMNS if is_hidden(d) else REAL_COLUMNS).get(col)
+                v = d["metrics"].get(spec[0], {}).get(spec[1]) if spec else None
             if v is not None and math.isfinite(float(v)):
                 out[scene] = float(v)
         return out
@@ -72,6 +74,12 @@ class RunSummary:
     def source_pattern(self) -> str:
         """The run folders as one brace pattern, e.g. ``results/{chair,tree}/b4/eigs`` (exact shell expansion)."""
         return brace_pattern(self.sources)
+
+
+def is_hidden(doc: dict[str, Any]) -> bool:
+    """A recording through the real-data path whose ground truth was hidden from training (``eigs evaluate
+    --hidden-ground-truth``)."""
+    return bool(doc.get("hidden_ground_truth"))
 
 
 def brace_pattern(paths: list[str]) -> str:
@@ -123,8 +131,11 @@ def summarise(paths: list[str | os.PathLike]) -> dict[str, RunSummary]:
     for s in runs.values():
         s.scenes = sorted(s.per_scene)
         docs = [s.per_scene[k] for k in s.scenes]
-        for col, (grp, key) in {**SYNTHETIC_COLUMNS, **REAL_COLUMNS}.items():
+        for col, (grp, key) in SYNTHETIC_COLUMNS.items():
             s.values[col] = _mean([d["metrics"].get(grp, {}).get(key) for d in docs])
+        for cols, hidden in ((REAL_COLUMNS, False), (HIDDEN_COLUMNS, True)):
+            for col, (grp, key) in cols.items():
+                s.values[col] = _mean([d["metrics"].get(grp, {}).get(key) for d in docs if is_hidden(d) == hidden])
         for col, key in RUN_COLUMNS.items():
             s.values[col] = _mean([d.get(key) for d in docs])
         for col, key in MOTION_COLUMNS.items():

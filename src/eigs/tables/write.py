@@ -100,7 +100,7 @@ def to_markdown(t: Table) -> str:
     lines = [f"**{t.title}**", "", "| " + " | ".join(header(t)) + " |", "|" + "---|" * len(header(t))]
     for r in t.rows:
         lines.append("| " + " | ".join(esc(x) for x in cells(t, r, "md")) + " |")
-    lines += ["", NOTE, ""]
+    lines += ["", NOTE, *(f"\n{n}" for n in t.notes), ""]
     return "\n".join(lines)
 
 
@@ -109,7 +109,8 @@ NOTE = (
     "the sharp ground truth, is an upper bound and not ranked); Δ oracle PSNR = ours − oracle (dB), the mean over the "
     "scenes both runs have; PSNR / SSIM "
     "(3dgs lineage) / LPIPS-alex are means over the synthetic scenes at the novel views, BRISQUE over the scenes "
-    "without ground truth; train time and FPS are means per scene; source: the run folders."
+    "without ground truth (where there is none, over the simulated recordings with a hidden ground truth, as the "
+    "note below says); train time and FPS are means per scene; source: the run folders."
 )
 
 _TEX = {
@@ -151,7 +152,7 @@ def to_latex(t: Table) -> str:
         # number cells hold only digits, signs, "h m s" and parentheses besides the \best{}/\second{} markup
         row = [x if ("\\best{" in x or "\\second{" in x) else tex_escape(x) for x in cells(t, r, "tex")]
         lines.append(" & ".join(row).replace("–", "--") + " \\\\")
-    lines += ["\\hline", "\\end{tabular}", ""]
+    lines += ["\\hline", "\\end{tabular}", *(f"% {n}" for n in t.notes), ""]
     return "\n".join(lines)
 
 
@@ -159,8 +160,9 @@ def csv_header(t: Table) -> list[str]:
     cols = ["table", "row", "label", "role", "run", "n_scenes"]
     if t.name == "table2":
         cols += list(CONFIG_COLUMNS)
-    for c in t.columns:
-        cols += [c.key, f"{c.key}_paper", f"{c.key}_rank", f"{c.key}_paper_rank"]
+    for c in t.columns:  # ours under the key of its values (brisque_sim in BRISQUE's place), the paper's under key
+        ours = c.source or c.key
+        cols += [ours, f"{c.key}_paper", f"{ours}_rank", f"{c.key}_paper_rank"]
     cols += [f"d_oracle_{k}" for k in ORACLE_DELTAS if any(k == c.key for c in t.columns)]
     cols += ["source"]
     return cols
