@@ -44,7 +44,7 @@ SSIM = Column("ssim", "SSIM↑", "higher", 4)
 BRISQUE = Column("brisque", "BRISQUE↓", "lower", 2)
 # the simulated recordings through the real-data path (hidden ground truth); shown in BRISQUE's place without real ones
 BRISQUE_SIM = Column("brisque_sim", "BRISQUE↓ (simulated, real-data path)", "lower", 2, shown=False)
-SIM_LABEL = "BRISQUE↓ (ours: simulated recordings via the real-data path; paper: real)"
+SIM_LABEL = "BRISQUE↓ (ours: simulated via the real-data path; paper: real)"
 TIME = Column("time_s", "train time", None, None)
 FPS = Column("fps", "FPS", None, 1, paper_decimals=2)
 GAUSSIANS = Column("n_gaussians", "Gaussians", None, 0, shown=False)
