@@ -1,6 +1,7 @@
 # Evaluation: one folder per run folder, results/{scene}/b{B}/eval/{run}/ (metrics.json, per_image.csv, renders/).
 # Synthetic scenes are scored at the test cameras of sfm/test_cameras.h5 against their ground truth; scenes without
-# ground truth by BRISQUE on the training views and a render path (config `evaluate: path_frames`). docs/evaluation.md.
+# ground truth by BRISQUE on the training views and a render path (config `evaluate: path_frames`); simulated
+# recordings through the real-data path with a hidden ground truth (config/davis346.yaml) both ways. docs/evaluation.md.
 
 
 rule evaluate:
