@@ -41,6 +41,7 @@ import yaml
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench.gpu_check import CheckError, copy_h5, cpu_name, sha256, train_config_json  # noqa: E402
 from bench.schedule import merge_configs  # noqa: E402
+from eigs import plan  # noqa: E402
 
 FORMAT = "eigs-device-batch"
 BENCH_HEADER = "s\th:m:s\tmax_rss\tmax_vms\tmax_uss\tmax_pss\tio_in\tio_out\tmean_load\tcpu_time\n"
@@ -73,13 +74,13 @@ def compact_json(values: dict) -> str:
 
 def prepare_spec(config: dict, scene: str, bins: list[int]) -> dict:
     """What the machine needs to make a built-in scene's artifacts as rules/synth.smk, edi.smk and sfm.smk do: the
-    scene's overrides and the edi (without bins), sfm (global section under the scene's own) and init sections."""
+    scene's overrides and the edi (without bins), sfm (eigs.plan.scene_sfm) and init sections."""
     spec = (config.get("scenes") or {}).get(scene)
     if not spec or "builtin" not in spec:
         raise CheckError(f"--prepare: {scene!r} is not a built-in scene of the config")
-    sfm = {**(config.get("sfm") or {}), **(spec.get("sfm") or {})}
-    if sfm.get("mode", "auto") not in ("auto", "colmap") or sfm.get("allow_given"):
+    if plan.sfm_rule(config, scene) != "sfm":
         raise CheckError(f"--prepare: scene {scene!r}: only COLMAP SfM is prepared on the machine")
+    sfm = plan.scene_sfm(config, scene)
     edi = {k: v for k, v in (config.get("edi") or {}).items() if k != "bins"}
     return {
         "builtin": spec["builtin"],
@@ -94,7 +95,6 @@ def prepare_spec(config: dict, scene: str, bins: list[int]) -> dict:
 def make_bundle(directory: Path, config: dict, jobs: list[tuple[str, str]], out: Path,
                 prepare: tuple[str, ...] = ()) -> dict:  # fmt: skip
     runs = config.get("runs") or {}
-    bins_default = int((config.get("edi") or {}).get("bins", [4])[0])
     manifest: dict = {"format": FORMAT, "version": 2, "jobs": [], "files": {}, "prepare": {}}
     for scene in prepare:
         if scene not in {s for s, _ in jobs}:
@@ -107,7 +107,7 @@ def make_bundle(directory: Path, config: dict, jobs: list[tuple[str, str]], out:
     for scene, run in jobs:
         if run not in runs:
             raise CheckError(f"--jobs: {run!r} is not a run of the config")
-        b = int(runs[run].get("bins", bins_default))
+        b = plan.run_bins(config, run)
         manifest["jobs"].append({"scene": scene, "run": run, "bins": b, "config": train_config_json(runs[run]),
                                  "prepared": scene in prepare})  # fmt: skip
         if scene in prepare:
