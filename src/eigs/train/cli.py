@@ -32,14 +32,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import json
     import logging
 
     import torch
 
     from eigs.errors import EigsError
     from eigs.train.catalog import FIELD, METHODS
-    from eigs.train.config import TrainConfig
+    from eigs.train.config import json_options
     from eigs.train.data import load_train_data
     from eigs.train.loop import train
     from eigs.train.resolve import train_config
@@ -53,8 +52,7 @@ def run(args: argparse.Namespace) -> int:
     if missing:
         usage = "eigs train SCENE.h5 EDI.h5 SFM_DIR INIT.ply -o RUN_DIR"
         raise EigsError("eigs train", f"missing {', '.join(missing)}: {usage}")
-    TrainConfig.from_json(args.config, where="--config")  # the JSON, its keys and types
-    cfg = train_config(json.loads(args.config or "{}"), "--config", args.method, args.steps)
+    cfg = train_config(json_options(args.config, "--config"), "--config", args.method, args.steps)
     if args.device == "cuda" and not torch.cuda.is_available():
         raise EigsError("--device", "cuda requested but no CUDA device is available")
     device = torch.device("cuda" if args.device == "cuda" or (args.device == "auto" and torch.cuda.is_available())

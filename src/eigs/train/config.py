@@ -103,8 +103,15 @@ class TrainConfig:
 
     @classmethod
     def from_json(cls, text: str, where: str = "train config") -> TrainConfig:
-        try:
-            values = json.loads(text) if text.strip() else {}
-        except json.JSONDecodeError as err:
-            raise EigsError(where, f"not valid JSON ({err})") from None
-        return cls.from_dict(values, where)
+        return cls.from_dict(json_options(text, where), where)
+
+
+def json_options(text: str, where: str = "train config") -> dict[str, Any]:
+    """The JSON object ``text`` (blank: ``{}``) as a dict; invalid JSON or another type raises :class:`EigsError`."""
+    try:
+        values = json.loads(text) if text.strip() else {}
+    except json.JSONDecodeError as err:
+        raise EigsError(where, f"not valid JSON ({err})") from None
+    if not isinstance(values, dict):
+        raise EigsError(where, f"expected a mapping of options, got {type(values).__name__}")
+    return values
