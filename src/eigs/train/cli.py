@@ -40,8 +40,8 @@ def run(args: argparse.Namespace) -> int:
     from eigs.train.catalog import FIELD, METHODS
     from eigs.train.config import json_options
     from eigs.train.data import load_train_data
-    from eigs.train.loop import train
     from eigs.train.resolve import train_config
+    from eigs.train.run import fit
 
     if args.list:
         for name, spec in sorted(METHODS.items()):
@@ -60,16 +60,15 @@ def run(args: argparse.Namespace) -> int:
     data = load_train_data(args.scene, args.edi, args.sfm, args.init)
     inputs = {"scene": args.scene, "edi": args.edi, "sfm": args.sfm, "init": args.init}
     if METHODS[cfg.method].family == FIELD:
-        from eigs.train.field_loop import train_field
-
-        fres = train_field(data, cfg, args.output, device, inputs=inputs)
-        rows, size, seconds = fres.rows, f"{fres.model.n_voxels} voxels", fres.train_seconds
+        from eigs.train.field_loop import FieldTrainer as trainer
     else:
-        res = train(data, cfg, args.output, device, inputs=inputs)
-        rows, size, seconds = res.rows, f"{len(res.model)} Gaussians", res.train_seconds
-    final = rows[-1] if rows else {}
+        from eigs.train.loop import Trainer as trainer
+    tr = trainer(data, cfg, device)
+    res = fit(tr, args.output, inputs=inputs)
+    final = res.rows[-1] if res.rows else {}
+    size = ", ".join(f"{v} {k}" for k, v in tr.size().items())
     logging.getLogger("eigs.train").info(
         "wrote %s: %s, %.1f s of training, held-out PSNR novel %s dB",
-        args.output, size, seconds, final.get("psnr_novel", "n/a"),
+        args.output, size, res.train_seconds, final.get("psnr_novel", "n/a"),
     )  # fmt: skip
     return 0

@@ -1,0 +1,327 @@
+"""The run every trainer shares (Gaussian: :class:`eigs.train.loop.Trainer`, radiance field:
+:class:`eigs.train.field_loop.FieldTrainer`): one step's frame with the non-finite skip, checkpoints and resumption,
+the step loop with its log and held-out PSNR, the result record and the run folder.
+
+A trainer subclasses :class:`RunTrainer` and supplies the model's parts (its hooks): the loss of one step, the
+optimisers' zero-grad and step, what follows the backward pass, its checkpoint state, its held-out render, its log
+and ``config.json`` facts and its model file. :func:`fit` trains one to the end and writes the run folder.
+
+Run folder (``RUN_DIR``): the model file (``model.ply`` or ``model.npz``), ``config.json`` (the resolved options,
+the inputs and the run's facts), ``train_log.csv``. Checkpoints go to the sibling ``RUN_DIR.partial/`` (Snakemake
+deletes a failed job's declared outputs, not this), which is removed once the run folder is complete.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import logging
+import math
+import platform
+import shutil
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from eigs import __version__
+from eigs.errors import EigsError
+from eigs.metrics.pixel import psnr_torch
+from eigs.train.config import TrainConfig
+from eigs.train.data import HeldOut, TrainData
+from eigs.util.atomic import atomic_path
+from eigs.util.progress import progress
+
+CHECKPOINT_VERSION = 1
+# the keys of every checkpoint beside a trainer's own (RunTrainer.model_state)
+RUN_STATE = ("step", "torch_rng", "rows", "wall", "bad", "skipped")
+
+
+@dataclass
+class RunResult:
+    """A finished (or stopped) run: the model and method as trained, the log rows, the training wall-clock seconds
+    and the number of steps skipped for a non-finite loss or gradient."""
+
+    model: Any  # eigs.train.model.GaussianModel or eigs.train.field_model.FieldModel
+    method: Any  # eigs.train.methods.Method or eigs.train.field_methods.FieldMethod
+    rows: list[dict[str, Any]]
+    train_seconds: float
+    skipped_steps: int
+
+
+def partial_dir_of(run_dir: str | Path) -> Path:
+    """The checkpoint folder of ``run_dir``: its sibling ``RUN_DIR.partial``."""
+    run_dir = Path(run_dir)
+    return run_dir.with_name(run_dir.name + ".partial")
+
+
+def finite_grads(params: list[torch.Tensor]) -> bool:
+    """Whether every gradient of ``params`` is finite (parameters without one count as finite)."""
+    grads = [p.grad for p in params if p.grad is not None]
+    if not grads:
+        return True
+    return bool(torch.stack([torch.isfinite(g).all() for g in grads]).all())
+
+
+@torch.no_grad()
+def psnr_by_kind(render: Callable[[int], torch.Tensor], held: HeldOut | None) -> dict[str, float]:
+    """Mean per-image PSNR (dB) of the 8-bit renders ``render(i)`` (H, W, C in [0, 1]) of the held-out images, by
+    kind: ``psnr_novel`` (novel views) and ``psnr_blur`` (blur views); NaN for a kind without images."""
+    out: dict[str, list[float]] = {"psnr_novel": [], "psnr_blur": []}
+    for i in range(len(held) if held is not None else 0):
+        img = torch.round(render(i).clamp(0, 1) * 255.0) / 255.0
+        p = float(psnr_torch(img.permute(2, 0, 1).cpu(), held.images[i].permute(2, 0, 1)))  # type: ignore[union-attr]
+        out["psnr_novel" if held.kind[i] == 1 else "psnr_blur"].append(p)  # type: ignore[union-attr]
+    return {k: (float(np.mean(v)) if v else math.nan) for k, v in out.items()}
+
+
+class RunTrainer:
+    """One run's state, one step's frame and checkpoints; a subclass adds the model (the hooks below)."""
+
+    log: logging.Logger  # the subclass module's logger (tests and users filter by it)
+    log_columns: tuple[str, ...]  # train_log.csv's fixed columns: step, wall_s, loss, the size, psnr_novel, psnr_blur
+
+    def _start(self, data: TrainData, cfg: TrainConfig, device: torch.device) -> None:
+        """Set the run's state (step 0, no rows) and seed torch."""
+        self.data, self.cfg, self.device = data, cfg, device
+        torch.manual_seed(cfg.seed)
+        self.step = 0
+        self.rows: list[dict[str, Any]] = []
+        self.wall = 0.0  # training seconds (wall clock)
+        self.bad = 0  # non-finite steps in a row
+        self.skipped = 0
+        self._last: dict[str, float] = {}  # the last good step's loss and terms
+
+    # ------------------------------------------------------------------ hooks
+    def forward(self) -> tuple[torch.Tensor, dict[str, float], Any]:
+        """Prepare step ``self.step`` (schedules, learning rates) and return its loss, its logged terms and what
+        :meth:`after_backward` needs."""
+        raise NotImplementedError
+
+    def zero_grad(self) -> None:
+        raise NotImplementedError
+
+    def trained_params(self) -> list[torch.Tensor]:
+        """Every tensor the optimisers step (their gradients are checked for NaN/Inf)."""
+        raise NotImplementedError
+
+    def after_backward(
+        self, loss: torch.Tensor, terms: dict[str, float], aux: Any
+    ) -> tuple[torch.Tensor, dict[str, float]]:
+        """After a finite backward pass of step ``self.step``: the loss and terms to log."""
+        return loss, terms
+
+    def optimizer_step(self) -> None:
+        """Step the optimisers (``self.step`` already counts this step) and what follows them."""
+        raise NotImplementedError
+
+    def model_state(self) -> dict[str, Any]:
+        """The checkpoint's model, optimiser, method and generator state (beside :data:`RUN_STATE`)."""
+        raise NotImplementedError
+
+    def state_problem(self, state: dict) -> str | None:
+        """What makes a checkpoint of this configuration unusable, or None."""
+        missing = [k for k in RUN_STATE if k not in state]
+        return f"missing {', '.join(missing)}" if missing else None
+
+    def restore_model(self, state: dict) -> None:
+        """Load :meth:`model_state`'s part of ``state``."""
+        raise NotImplementedError
+
+    def held_out(self, step: int) -> dict[str, float]:
+        """Held-out PSNR at ``step`` (:func:`psnr_by_kind`)."""
+        raise NotImplementedError
+
+    def size(self) -> dict[str, Any]:
+        """The model-size columns of a log row."""
+        raise NotImplementedError
+
+    def describe(self, step: int, row: dict[str, Any]) -> str:
+        """The log line of an evaluated step."""
+        raise NotImplementedError
+
+    def log_start(self) -> None:
+        """Log the run's start (method, steps, model size, device)."""
+
+    def before_steps(self) -> None:
+        """Anything to do once before the first step of this process (after resuming)."""
+
+    def facts(self) -> tuple[dict[str, Any], dict[str, Any]]:
+        """``config.json``'s model facts: those before ``train_seconds`` and those after ``skipped_steps``."""
+        raise NotImplementedError
+
+    def write_model(self, folder: Path) -> None:
+        """Write the model file (and any companion file) into ``folder``."""
+        raise NotImplementedError
+
+    # ------------------------------------------------------------------ one step
+    def train_step(self) -> bool:
+        """Run step ``self.step``; False when it was skipped (non-finite loss or gradient)."""
+        step = self.step
+        loss, terms, aux = self.forward()
+        self.zero_grad()
+        ok = bool(torch.isfinite(loss))
+        if ok:
+            loss.backward()
+            ok = finite_grads(self.trained_params())
+        if ok:
+            loss, terms = self.after_backward(loss, terms, aux)
+        self.step += 1
+        if not ok:
+            self.zero_grad()
+            self.bad += 1
+            self.skipped += 1
+            self.log.warning("step %d: non-finite loss or gradient, skipped (%d in a row)", step, self.bad)
+            return False
+        self.bad = 0
+        self.optimizer_step()
+        self._last = {"loss": loss.item(), **terms}
+        return True
+
+    # ------------------------------------------------------------------ checkpoints
+    def state_dict(self) -> dict[str, Any]:
+        return {
+            "version": CHECKPOINT_VERSION,
+            "config": self.cfg.to_dict(),
+            "step": self.step,
+            **self.model_state(),
+            "torch_rng": torch.get_rng_state(),
+            "rows": self.rows,
+            "wall": self.wall,
+            "bad": self.bad,
+            "skipped": self.skipped,
+        }
+
+    def save_checkpoint(self, path: Path) -> None:
+        with atomic_path(path) as tmp:
+            torch.save(self.state_dict(), tmp)
+
+    def load_checkpoint(self, path: Path) -> bool:
+        """Resume from ``path``; False (and a warning naming it) when it belongs to another configuration or is
+        unreadable or damaged, the trainer then as freshly built (a checkpoint is a cache: the run starts over)."""
+        log = self.log
+        try:
+            state = torch.load(path, map_location="cpu", weights_only=False)
+        except Exception as err:  # a truncated or foreign file: start over rather than fail
+            log.warning("ignoring unreadable checkpoint %s (%s)", path, str(err).splitlines()[0] if str(err) else err)
+            return False
+        if not isinstance(state, dict):
+            log.warning("ignoring checkpoint %s: not a checkpoint", path)
+            return False
+        if state.get("version") != CHECKPOINT_VERSION or state.get("config") != self.cfg.to_dict():
+            log.warning("ignoring checkpoint %s: written for another configuration", path)
+            return False
+        problem = self.state_problem(state)
+        if problem is None:
+            try:
+                self.restore_model(state)
+                torch.set_rng_state(state["torch_rng"])
+                self.step, self.rows, self.wall = int(state["step"]), list(state["rows"]), float(state["wall"])
+                self.bad, self.skipped = int(state["bad"]), int(state["skipped"])
+            except Exception as err:  # damage the checks cannot see: rebuild and start over
+                problem = f"{type(err).__name__}: {err}".splitlines()[0]
+                self.__init__(self.data, self.cfg, self.device)  # type: ignore[misc]
+        if problem is not None:
+            log.warning("ignoring damaged checkpoint %s (%s)", path, problem)
+            return False
+        log.info("resumed from %s at step %d", path, self.step)
+        return True
+
+
+def run_steps(tr: RunTrainer, ckpt: Path, run_dir: Path, stop_after: int | None) -> bool:
+    """``tr.train_step()`` from ``tr.step`` to ``cfg.steps`` with the wall clock, the non-finite-streak stop, a log
+    row every ``log_every`` steps (and held-out PSNR every ``eval_every``), checkpoints every ``checkpoint_every``.
+    True when it left at ``stop_after`` (checkpoint written, no outputs)."""
+    cfg = tr.cfg
+    has_held_out = tr.data.held_out is not None
+    for _ in progress(range(tr.step, cfg.steps), desc=f"train {cfg.method}", total=cfg.steps - tr.step, unit="step"):
+        t0 = time.perf_counter()
+        tr.train_step()
+        tr.wall += time.perf_counter() - t0
+        if tr.bad >= cfg.max_bad_steps:
+            tr.save_checkpoint(ckpt)
+            raise EigsError(
+                run_dir,
+                f"{tr.bad} consecutive steps had a non-finite loss or gradient (last at step {tr.step}); the last "
+                f"good state is in {ckpt}",
+            )
+        s = tr.step
+        evaluate = has_held_out and cfg.eval_every and (s % cfg.eval_every == 0 or s == cfg.steps)
+        if s % cfg.log_every == 0 or s == cfg.steps or evaluate:
+            row: dict[str, Any] = {"step": s, "wall_s": round(tr.wall, 4), **tr._last, **tr.size()}
+            if evaluate:
+                row.update(tr.held_out(s))
+                tr.log.info("%s", tr.describe(s, row))
+            tr.rows.append(row)
+        if s % cfg.checkpoint_every == 0 and s < cfg.steps:
+            tr.save_checkpoint(ckpt)
+        if stop_after is not None and s >= stop_after:
+            tr.save_checkpoint(ckpt)
+            return True
+    return False
+
+
+def fit(
+    tr: RunTrainer, run_dir: str | Path, *, inputs: dict[str, str] | None = None, stop_after: int | None = None
+) -> RunResult:
+    """Train ``tr`` to ``cfg.steps`` (resuming from ``RUN_DIR.partial/checkpoint.pt`` when there is one) and write
+    the run folder. ``stop_after``: leave after this many steps (checkpoint written, no outputs) — for tests of
+    resumption."""
+    run_dir = Path(run_dir)
+    ckpt = partial_dir_of(run_dir) / "checkpoint.pt"
+    if ckpt.exists():
+        tr.load_checkpoint(ckpt)
+    tr.log_start()
+    tr.before_steps()
+    if not run_steps(tr, ckpt, run_dir, stop_after):
+        write_run(tr, run_dir, inputs or {})
+        shutil.rmtree(partial_dir_of(run_dir), ignore_errors=True)
+    return RunResult(tr.model, tr.method, tr.rows, tr.wall, tr.skipped)  # type: ignore[attr-defined]
+
+
+def log_csv(rows: list[dict[str, Any]], fixed: tuple[str, ...]) -> str:
+    """The rows as CSV: ``fixed`` columns (step, wall_s, loss, then the model size and held-out columns), each
+    method's loss terms in first-seen order after the first three."""
+    extra: list[str] = []
+    for r in rows:
+        for k in r:
+            if k not in fixed and k not in extra:
+                extra.append(k)
+    columns = [*fixed[:3], *extra, *fixed[3:]]
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=columns, restval="", lineterminator="\n")
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: ("" if isinstance(v, float) and math.isnan(v) else v) for k, v in r.items()})
+    return buf.getvalue()
+
+
+def write_run(tr: RunTrainer, run_dir: Path, inputs: dict[str, str]) -> None:
+    """Write the model file, ``config.json`` and ``train_log.csv`` together (atomic directory rename)."""
+    head, tail = tr.facts()
+    facts = {
+        "eigs_version": __version__,
+        "torch_version": torch.__version__,
+        "device": str(tr.device),
+        "threads": torch.get_num_threads(),
+        "machine": platform.machine(),
+        **head,
+        "train_seconds": round(tr.wall, 3),
+        # CPU seconds of this process so far (all threads: data loading, training, writing; a resumed run counts
+        # its last process only): what the job costs alone on a shared machine (Snakemake's benchmark files
+        # sample CPU time every ~30 s and miss up to that much of a job's end)
+        "process_cpu_s": round(time.process_time(), 3),
+        "skipped_steps": tr.skipped,
+        **tail,
+        "final": tr.rows[-1] if tr.rows else {},
+    }
+    doc = {"train": tr.cfg.to_dict(), "inputs": inputs, "run": facts}
+    with atomic_path(run_dir, directory=True) as tmp:
+        tr.write_model(tmp)
+        (tmp / "config.json").write_text(json.dumps(doc, indent=2, default=float) + "\n")
+        (tmp / "train_log.csv").write_text(log_csv(tr.rows, tr.log_columns))
