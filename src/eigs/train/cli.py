@@ -63,10 +63,9 @@ def run(args: argparse.Namespace) -> int:
         from eigs.train.field_loop import FieldTrainer as trainer
     else:
         from eigs.train.loop import Trainer as trainer
-    tr = trainer(data, cfg, device)
-    res = fit(tr, args.output, inputs=inputs)
+    res = fit(trainer(data, cfg, device), args.output, inputs=inputs)
     final = res.rows[-1] if res.rows else {}
-    size = ", ".join(f"{v} {k}" for k, v in tr.size().items())
+    size = f"{res.model.n_voxels} voxels" if METHODS[cfg.method].family == FIELD else f"{len(res.model)} Gaussians"
     logging.getLogger("eigs.train").info(
         "wrote %s: %s, %.1f s of training, held-out PSNR novel %s dB",
         args.output, size, res.train_seconds, final.get("psnr_novel", "n/a"),
