@@ -10,7 +10,13 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-import pytest
+# Before anything loads OpenMP (torch): idle OpenMP threads sleep instead of spinning. pytest-xdist's workers and
+# the Snakemake jobs of the workflow tests run torch side by side on few cores; with spinning threads each waits
+# for cores that the other's idle threads burn (the toy DAG test: 328 s beside tests/train/test_train.py, 142 s
+# with this; docs/development.md "Test suite time").
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+import pytest  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared"

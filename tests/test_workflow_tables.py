@@ -110,7 +110,7 @@ def test_real_config_dry_runs_when_shared_data_is_present():
 
 
 def test_toy_dag_end_to_end_produces_the_tables(tmp_path):
-    """snakemake all on config/toy.yaml in a scratch directory: synth → … → train (4 runs) → evaluate → tables,
+    """snakemake all on config/toy.yaml in a scratch directory: synth → … → train (5 runs) → evaluate → tables,
     figures. Records the toy Table I (EiGS against 3DGS) in the test output."""
     cmd = [sys.executable, "-m", "snakemake", "all", "--cores", "2", "-s", str(REPO / "workflow" / "Snakefile"),
            "--directory", str(tmp_path), f"--configfile={REPO / 'config' / 'toy.yaml'}"]  # fmt: skip
@@ -135,8 +135,9 @@ def test_toy_dag_end_to_end_produces_the_tables(tmp_path):
     assert rows["eigs"]["source"] == "results/toy/b4/eigs" and rows["eigs"]["psnr_paper"] == "28.21"
     doc = json.loads((tmp_path / "results/toy/b4/eval/eigs/metrics.json").read_text())
     assert float(rows["eigs"]["psnr"]) == pytest.approx(doc["metrics"]["novel"]["psnr"], abs=1e-12)
-    print(
-        f"toy Table I novel PSNR: eigs {float(rows['eigs']['psnr']):.2f}, 3dgs {float(rows['3dgs']['psnr']):.2f}, "
-        f"edi-3dgs {float(rows['edi-3dgs']['psnr']):.2f}, oracle {float(rows['oracle']['psnr']):.2f}"
-    )
-    assert float(rows["eigs"]["psnr"]) > float(rows["3dgs"]["psnr"])  # acceptance: EiGS above 3DGS
+    psnr = {row: float(rows[row]["psnr"]) for row in ("3dgs", "edi-3dgs", "eigs", "eigs+", "oracle")}
+    print("toy Table I novel PSNR: " + ", ".join(f"{row} {value:.2f}" for row, value in psnr.items()))
+    # the suite's story at the toy's budgets (config/toy.yaml; docs/evaluation.md "The toy's budgets", measured:
+    # 3dgs 22.56, eigs 27.05, edi-3dgs 28.53, eigs+ 28.93): EiGS above 3DGS, eigs+ above 3DGS on the EDI frames
+    assert psnr["eigs"] > psnr["3dgs"]
+    assert psnr["eigs+"] > psnr["edi-3dgs"] > psnr["3dgs"]
