@@ -41,7 +41,8 @@ pytestmark = pytest.mark.cluster
 def snakemake(workdir: Path, *args: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
     workdir.mkdir(parents=True, exist_ok=True)
     cmd = [sys.executable, "-m", "snakemake", "all_sfm", "-s", str(REPO / "workflow" / "Snakefile")]
-    cmd += ["--directory", str(workdir), f"--configfile={TOY}", *args]
+    # two threads per job (config/toy.yaml has one), so the CPU request of a multi-threaded job shows below
+    cmd += ["--directory", str(workdir), f"--configfile={TOY}", "--config", "threads=2", *args]
     proc = subprocess.run(cmd, capture_output=True, text=True, check=False, timeout=1200, env=env)
     (workdir / "snakemake.out").write_text(proc.stdout + proc.stderr)
     return proc
@@ -131,7 +132,7 @@ def test_toy_dag_through_slurm_equals_local_run(cluster, tmp_path):
         assert (rec["JobState"], rec["ExitCode"]) == ("COMPLETED", "0:0"), rec
         assert Path(rec["WorkDir"]).resolve() == remote.resolve(), rec
 
-    # The profile's requests reached the scheduler: CPUs = threads (toy: 2, init: 1), --mem = mem_mb,
+    # The profile's requests reached the scheduler: CPUs = threads (2 as set above, init: 1), --mem = mem_mb,
     # --time = runtime (minutes), and init's GPU.
     expect = {"synth": (2, 4000, 60), "edi": (2, 4000, 60), "sfm_given": (2, 6000, 60), "init": (1, 2000, 30)}
     for rule, (cpus, mem, minutes) in expect.items():
