@@ -21,6 +21,7 @@ import math
 import platform
 import shutil
 import time
+from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -80,8 +81,9 @@ def psnr_by_kind(render: Callable[[int], torch.Tensor], held: HeldOut | None) ->
     return {k: (float(np.mean(v)) if v else math.nan) for k, v in out.items()}
 
 
-class RunTrainer:
-    """One run's state, one step's frame and checkpoints; a subclass adds the model (the hooks below)."""
+class RunTrainer(ABC):
+    """One run's state, one step's frame and checkpoints; a subclass adds the model (the abstract hooks below;
+    the others have defaults)."""
 
     log: logging.Logger  # the subclass module's logger (tests and users filter by it)
     log_columns: tuple[str, ...]  # train_log.csv's fixed columns: step, wall_s, loss, the size, psnr_novel, psnr_blur
@@ -98,17 +100,18 @@ class RunTrainer:
         self._last: dict[str, float] = {}  # the last good step's loss and terms
 
     # ------------------------------------------------------------------ hooks
+    @abstractmethod
     def forward(self) -> tuple[torch.Tensor, dict[str, float], Any]:
         """Prepare step ``self.step`` (schedules, learning rates) and return its loss, its logged terms and what
         :meth:`after_backward` needs."""
-        raise NotImplementedError
 
+    @abstractmethod
     def zero_grad(self) -> None:
-        raise NotImplementedError
+        """Clear the gradients of every optimiser."""
 
+    @abstractmethod
     def trained_params(self) -> list[torch.Tensor]:
         """Every tensor the optimisers step (their gradients are checked for NaN/Inf)."""
-        raise NotImplementedError
 
     def after_backward(
         self, loss: torch.Tensor, terms: dict[str, float], aux: Any
@@ -116,48 +119,49 @@ class RunTrainer:
         """After a finite backward pass of step ``self.step``: the loss and terms to log."""
         return loss, terms
 
+    @abstractmethod
     def optimizer_step(self) -> None:
         """Step the optimisers (``self.step`` already counts this step) and what follows them."""
-        raise NotImplementedError
 
+    @abstractmethod
     def model_state(self) -> dict[str, Any]:
         """The checkpoint's model, optimiser, method and generator state (beside :data:`RUN_STATE`)."""
-        raise NotImplementedError
 
     def state_problem(self, state: dict) -> str | None:
         """What makes a checkpoint of this configuration unusable, or None."""
         missing = [k for k in RUN_STATE if k not in state]
         return f"missing {', '.join(missing)}" if missing else None
 
+    @abstractmethod
     def restore_model(self, state: dict) -> None:
         """Load :meth:`model_state`'s part of ``state``."""
-        raise NotImplementedError
 
+    @abstractmethod
     def held_out(self, step: int) -> dict[str, float]:
         """Held-out PSNR at ``step`` (:func:`psnr_by_kind`)."""
-        raise NotImplementedError
 
+    @abstractmethod
     def size(self) -> dict[str, Any]:
         """The model-size columns of a log row."""
-        raise NotImplementedError
 
+    @abstractmethod
     def describe(self, step: int, row: dict[str, Any]) -> str:
         """The log line of an evaluated step."""
-        raise NotImplementedError
 
+    @abstractmethod
     def log_start(self) -> None:
         """Log the run's start (method, steps, model size, device)."""
 
-    def before_steps(self) -> None:
+    def before_steps(self) -> None:  # noqa: B027 (an optional hook: nothing by default)
         """Anything to do once before the first step of this process (after resuming)."""
 
+    @abstractmethod
     def facts(self) -> tuple[dict[str, Any], dict[str, Any]]:
         """``config.json``'s model facts: those before ``train_seconds`` and those after ``skipped_steps``."""
-        raise NotImplementedError
 
+    @abstractmethod
     def write_model(self, folder: Path) -> None:
         """Write the model file (and any companion file) into ``folder``."""
-        raise NotImplementedError
 
     # ------------------------------------------------------------------ one step
     def train_step(self) -> bool:
