@@ -1,5 +1,6 @@
 """Train and evaluate many runs of the suite in parallel on a many-core machine without Snakemake (the device
-machine of docs/benchmarks.md "GPU path" has 16 cores, CUDA PyTorch and no network), one thread per job.
+machine of docs/benchmarks.md "GPU path" has 16 cores, CUDA PyTorch and no network), one thread per job
+(``run --threads N``: N).
 
 ``bundle``: copy the prepared artifacts of some scenes (scene file without its raw events, EDI, SfM poses and test
 cameras, init cloud: what `eigs train` and `eigs evaluate` read) into a folder with a manifest of every job's
@@ -8,6 +9,10 @@ cameras, init cloud: what `eigs train` and `eigs evaluate` read) into a folder w
 ``--prepare SCENE,...`` leaves the artifacts of those built-in scenes out of the bundle and records their
 configuration instead: the machine makes them (`eigs synth`, `eigs edi`, `eigs sfm`, `eigs init`, exactly as
 rules/synth.smk, edi.smk and sfm.smk call them, one thread each), first, before the jobs that read them.
+
+``--edi-on-machine SCENE,...`` carries those scenes' scene file with its events (and their SfM poses, test cameras and
+init cloud) but not their EDI file, which at 346×260 is larger than what travels to the machine: the machine runs
+`eigs edi` as rules/edi.smk calls it, first, before the jobs that read it.
 
 ``run``: the scenes to prepare, then the jobs in the given order, on ``--workers`` processes, each `eigs train` then
 `eigs evaluate` on the CPU, exactly as rules/train.smk and rules/evaluate.smk call them; a stage starts when the
@@ -92,13 +97,30 @@ def prepare_spec(config: dict, scene: str, bins: list[int]) -> dict:
     }
 
 
+def evaluate_options(config: dict, scene: str) -> list[str]:
+    """`eigs evaluate` flags of a scene as rules/common_tables.smk ``evaluate_options`` builds them."""
+    e = config.get("evaluate") or {}
+    out = ["--path-frames", str(int(e["path_frames"]))] if "path_frames" in e else []
+    if plan.scene_hidden_ground_truth(config, scene):
+        out.append("--hidden-ground-truth")
+    return out
+
+
+def edi_config(config: dict) -> str:
+    """The `edi:` section without `bins`, as rules/common.smk ``edi_config`` passes it."""
+    return compact_json({k: v for k, v in (config.get("edi") or {}).items() if k != "bins"})
+
+
 def make_bundle(directory: Path, config: dict, jobs: list[tuple[str, str]], out: Path,
-                prepare: tuple[str, ...] = ()) -> dict:  # fmt: skip
+                prepare: tuple[str, ...] = (), edi_on_machine: tuple[str, ...] = ()) -> dict:  # fmt: skip
     runs = config.get("runs") or {}
-    manifest: dict = {"format": FORMAT, "version": 2, "jobs": [], "files": {}, "prepare": {}}
-    for scene in prepare:
-        if scene not in {s for s, _ in jobs}:
-            raise CheckError(f"--prepare: no job trains on {scene!r}")
+    manifest: dict = {"format": FORMAT, "version": 3, "jobs": [], "files": {}, "prepare": {}, "edi": {}}
+    for flag, names in (("--prepare", prepare), ("--edi-on-machine", edi_on_machine)):
+        for scene in names:
+            if scene not in {s for s, _ in jobs}:
+                raise CheckError(f"{flag}: no job trains on {scene!r}")
+    if set(prepare) & set(edi_on_machine):
+        raise CheckError("a scene is both in --prepare and in --edi-on-machine")
     tmp = out.with_name(f".{out.name}.tmp")
     if tmp.exists():
         import shutil
@@ -109,13 +131,20 @@ def make_bundle(directory: Path, config: dict, jobs: list[tuple[str, str]], out:
             raise CheckError(f"--jobs: {run!r} is not a run of the config")
         b = plan.run_bins(config, run)
         manifest["jobs"].append({"scene": scene, "run": run, "bins": b, "config": train_config_json(runs[run]),
-                                 "prepared": scene in prepare})  # fmt: skip
+                                 "prepared": scene in prepare,
+                                 "evaluate": evaluate_options(config, scene)})  # fmt: skip
         if scene in prepare:
             bins = sorted({*manifest["prepare"].get(scene, {}).get("bins", []), b})
             manifest["prepare"][scene] = prepare_spec(config, scene, bins)
             continue
+        names = ["sfm/poses.h5", "sfm/test_cameras.h5", "init.ply"]
+        if scene in edi_on_machine:
+            bins = sorted({*manifest["edi"].get(scene, {}).get("bins", []), b})
+            manifest["edi"][scene] = {"bins": bins, "edi": edi_config(config)}
+        else:
+            names.insert(0, "edi.h5")
         src = {f"{scene}/scene.h5": directory / "results" / scene / "scene.h5"}
-        for name in ("edi.h5", "sfm/poses.h5", "sfm/test_cameras.h5", "init.ply"):
+        for name in names:
             src[f"{scene}/b{b}/{name}"] = directory / "results" / scene / f"b{b}" / name
         for rel, path in src.items():
             if rel in manifest["files"]:
@@ -125,7 +154,8 @@ def make_bundle(directory: Path, config: dict, jobs: list[tuple[str, str]], out:
             dst = tmp / rel
             dst.parent.mkdir(parents=True, exist_ok=True)
             if path.suffix == ".h5":
-                copy_h5(path, dst, skip=("events",) if path.name == "scene.h5" else ())
+                keep_events = path.name != "scene.h5" or scene in edi_on_machine  # EDI reads them there
+                copy_h5(path, dst, skip=() if keep_events else ("events",))
             else:
                 dst.write_bytes(path.read_bytes())
             manifest["files"][rel] = {"sha256": sha256(dst), "bytes": dst.stat().st_size}
@@ -164,18 +194,29 @@ def prepare_commands(work: Path, scene: str, spec: dict) -> list[tuple[str, str,
     return cmds
 
 
-def job_commands(bundle: Path, resources: Path, work: Path, job: dict) -> list[list[str]]:
+def edi_command(bundle: Path, work: Path, scene: str, b: int, edi: str, threads: int = 1) -> list[str]:
+    """`eigs edi` of a scene carried with its events, as rules/edi.smk calls it."""
+    d = work / "results" / scene / f"b{b}"
+    return [*eigs_command(), "edi", str(bundle / scene / "scene.h5"), "-o", str(d / "edi.h5"), "--latent-dir",
+            str(d / "latent"), "--bins", str(b), "--config", edi, "--threads", str(threads)]  # fmt: skip
+
+
+def job_commands(bundle: Path, resources: Path, work: Path, job: dict, edi_here: bool = False,
+                 threads: int = 1) -> list[list[str]]:  # fmt: skip
+    """`eigs train` then `eigs evaluate` of a job on ``threads`` threads; ``edi_here``: its EDI file was made on
+    the machine."""
     s, r, b = job["scene"], job["run"], job["bins"]
     base = (work / "results" if job.get("prepared") else bundle) / s
+    edi = (work / "results" / s if edi_here else base) / f"b{b}" / "edi.h5"
     run_dir = work / "results" / s / f"b{b}" / r
     metrics = work / "results" / s / f"b{b}" / "eval" / r / "metrics.json"
     eigs = eigs_command()
     return [
-        [*eigs, "train", str(base / "scene.h5"), str(base / f"b{b}" / "edi.h5"), str(base / f"b{b}" / "sfm"),
+        [*eigs, "train", str(base / "scene.h5"), str(edi), str(base / f"b{b}" / "sfm"),
          str(base / f"b{b}" / "init.ply"), "-o", str(run_dir), "--config", job["config"], "--device", "cpu",
-         "--threads", "1"],
+         "--threads", str(threads)],
         [*eigs, "evaluate", str(run_dir), str(base / "scene.h5"), str(base / f"b{b}" / "sfm"), "-o", str(metrics),
-         "--resources", str(resources), "--device", "cpu", "--threads", "1"],
+         *job.get("evaluate", []), "--resources", str(resources), "--device", "cpu", "--threads", str(threads)],
     ]  # fmt: skip
 
 
@@ -184,7 +225,7 @@ def benchmark_row(wall: float, cpu: float, max_rss_kb: int) -> str:
     return f"{wall:.2f}\t{hms}\t{max_rss_kb / 1024:.2f}\tNA\tNA\tNA\tNA\tNA\tNA\t{cpu:.2f}\n"
 
 
-def batch_tasks(bundle: Path, resources: Path, work: Path, manifest: dict) -> list[dict]:
+def batch_tasks(bundle: Path, resources: Path, work: Path, manifest: dict, threads: int = 1) -> list[dict]:
     """Every stage to run, in priority order (the scenes to prepare first: the jobs wait for them), each with the
     index of the task it reads (``after``) and where its benchmark goes."""
     tasks: list[dict] = []
@@ -195,25 +236,35 @@ def batch_tasks(bundle: Path, resources: Path, work: Path, manifest: dict) -> li
             tasks.append({"scene": scene, "run": None, "stage": stage, "name": name, "cmd": cmd, "after": prev})
             prev = len(tasks) - 1
         last_of_scene[scene] = prev
+    edi_task: dict[tuple[str, int], int] = {}
+    for scene, spec in (manifest.get("edi") or {}).items():
+        for b in spec["bins"]:
+            tasks.append({"scene": scene, "run": None, "stage": "edi", "name": f"{scene}_b{b}",
+                          "cmd": edi_command(bundle, work, scene, b, spec["edi"], threads),
+                          "after": None})  # fmt: skip
+            edi_task[scene, b] = len(tasks) - 1
     for job in manifest["jobs"]:
         name = f"{job['scene']}_b{job['bins']}_{job['run']}"
-        after = last_of_scene.get(job["scene"]) if job.get("prepared") else None
-        for stage, cmd in zip(("train", "evaluate"), job_commands(bundle, resources, work, job), strict=True):
+        after = last_of_scene.get(job["scene"]) if job.get("prepared") else edi_task.get((job["scene"], job["bins"]))
+        edi_here = (job["scene"], job["bins"]) in edi_task
+        cmds = job_commands(bundle, resources, work, job, edi_here=edi_here, threads=threads)
+        for stage, cmd in zip(("train", "evaluate"), cmds, strict=True):
             tasks.append({"scene": job["scene"], "run": job["run"], "stage": stage, "name": name, "cmd": cmd,
                           "after": after})  # fmt: skip
             after = len(tasks) - 1
     return tasks
 
 
-def run_batch(bundle: Path, resources: Path, work: Path, workers: int, start_until: float, deadline: float) -> dict:
+def run_batch(bundle: Path, resources: Path, work: Path, workers: int, start_until: float, deadline: float,
+              threads: int = 1) -> dict:  # fmt: skip
     manifest = json.loads((bundle / "MANIFEST.json").read_text())
     if manifest.get("format") != FORMAT:
         raise CheckError(f"{bundle}: not a {FORMAT} bundle")
     t0 = time.monotonic()
-    tasks = batch_tasks(bundle, resources, work, manifest)
+    tasks = batch_tasks(bundle, resources, work, manifest, threads)
     state = ["pending"] * len(tasks)  # pending / running / ok / failed / stopped / skipped
     running: dict[int, tuple[int, float, subprocess.Popen]] = {}  # pid -> (task index, start, process)
-    env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONUNBUFFERED="1")
+    env = dict(os.environ, OMP_NUM_THREADS=str(threads), PYTHONUNBUFFERED="1")
     (work / "logs").mkdir(parents=True, exist_ok=True)
 
     def start(i: int) -> None:
@@ -264,7 +315,7 @@ def run_batch(bundle: Path, resources: Path, work: Path, workers: int, start_unt
                                                       ru.ru_maxrss))  # fmt: skip
     report = {"elapsed_s": round(time.monotonic() - t0, 1), "workers": workers, "jobs": job_report(tasks, state),
               "prepared": prepare_report(tasks, state), "cpu": cpu_name() or "unknown",
-              "cores": os.cpu_count()}  # fmt: skip
+              "cores": os.cpu_count(), "threads_per_job": threads}  # fmt: skip
     (work / "batch.json").write_text(json.dumps(report, indent=2) + "\n")
     return report
 
@@ -332,6 +383,7 @@ def main(argv: list[str] | None = None) -> int:
     b.add_argument("--jobs", required=True, help="scene:run,scene:run,... in the order they should run")
     b.add_argument("-o", "--out", type=Path, required=True)
     b.add_argument("--prepare", default="", help="built-in scenes the machine makes itself (scene,scene,...)")
+    b.add_argument("--edi-on-machine", default="", help="scenes whose EDI file the machine makes (scene,scene,...)")
     r = sub.add_parser("run")
     r.add_argument("--bundle", type=Path, required=True)
     r.add_argument("--resources", type=Path, required=True, help="folder with lpips/ (eigs evaluate --resources)")
@@ -339,17 +391,19 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     r.add_argument("--start-until", type=float, default=float("inf"))
     r.add_argument("--deadline", type=float, default=float("inf"))
+    r.add_argument("--threads", type=int, default=1, help="threads of each job (the prepared scenes' stages: 1)")
     r.add_argument("--pack", type=Path)
     a = ap.parse_args(argv)
     try:
         if a.cmd == "bundle":
             prepare = tuple(x.strip() for x in a.prepare.split(",") if x.strip())
-            m = make_bundle(a.directory, merged_config(a.config), parse_jobs(a.jobs), a.out, prepare)
+            edi_here = tuple(x.strip() for x in a.edi_on_machine.split(",") if x.strip())
+            m = make_bundle(a.directory, merged_config(a.config), parse_jobs(a.jobs), a.out, prepare, edi_here)
             print(f"{a.out}: {len(m['jobs'])} jobs, {sum(f['bytes'] for f in m['files'].values()) / 2**20:.1f} MiB")
         else:
-            if a.workers < 1:
-                raise CheckError("--workers must be >= 1")
-            rep = run_batch(a.bundle, a.resources, a.work, a.workers, a.start_until, a.deadline)
+            if a.workers < 1 or a.threads < 1:
+                raise CheckError("--workers and --threads must be >= 1")
+            rep = run_batch(a.bundle, a.resources, a.work, a.workers, a.start_until, a.deadline, a.threads)
             ok = sum(j["status"] == "ok" for j in rep["jobs"])
             print(f"device_batch: {ok} of {len(rep['jobs'])} jobs finished in {rep['elapsed_s']} s on {rep['cpu']}")
             if a.pack:

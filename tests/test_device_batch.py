@@ -43,7 +43,7 @@ def test_scheduler_runs_both_stages_records_failures_and_stops_at_the_deadline(t
     (bundle / "MANIFEST.json").write_text(json.dumps({"format": db.FORMAT, "jobs": jobs}))
     busy = "import time\nt = time.process_time()\nwhile time.process_time() - t < 0.3: pass\n"
 
-    def commands(_bundle, _res, work, job):
+    def commands(_bundle, _res, work, job, edi_here=False, threads=1):
         out = work / "results" / job["scene"] / "b4" / job["run"]
         if job["run"] == "fails":
             return [_script("import time; time.sleep(0.3); raise SystemExit(3)"), _script("")]
@@ -113,7 +113,7 @@ def test_prepared_scenes_are_made_first_and_their_jobs_read_them(tmp_path, monke
         return [(st, scene, _script(f"open({str(order)!r}, 'a').write('{scene}:{st}\\n'); " + (code if st == "synth"
                                     else ""))) for st in stages]  # fmt: skip
 
-    def commands(_bundle, _res, _work, job):
+    def commands(_bundle, _res, _work, job, edi_here=False, threads=1):
         return [_script(f"open({str(order)!r}, 'a').write('{job['scene']}:train\\n')"), _script("")]
 
     monkeypatch.setattr(db, "prepare_commands", prepare)
@@ -125,3 +125,49 @@ def test_prepared_scenes_are_made_first_and_their_jobs_read_them(tmp_path, monke
     assert rep["prepared"] == {"c": "ok", "d": "synth failed"}
     assert {j["scene"]: j["status"] for j in rep["jobs"]} == {"c": "ok", "d": "skipped: its scene was not prepared"}
     assert (work / "benchmarks" / "sfm" / "c.tsv").is_file()
+
+
+def test_edi_on_machine_carries_the_events_and_runs_edi_before_the_jobs(tmp_path):
+    """A scene whose EDI is made on the machine: its scene file keeps its events, no edi.h5 is carried, one `eigs
+    edi` per B runs first with the rules' --config, the jobs read its output; a hidden-ground-truth scene is
+    evaluated with --hidden-ground-truth as rules/common_tables.smk asks."""
+    import h5py
+    import numpy as np
+
+    src = tmp_path / "results" / "s"
+    (src / "b4" / "sfm").mkdir(parents=True)
+    with h5py.File(src / "scene.h5", "w") as f:
+        f["events/binned"] = np.arange(4096, dtype=np.int32).reshape(64, 64)
+        f["frames/blurry"] = np.zeros((2, 8, 8, 3), np.uint8)
+    for name in ("sfm/poses.h5", "sfm/test_cameras.h5"):
+        with h5py.File(src / "b4" / name, "w") as f:
+            f["x"] = np.ones(3)
+    (src / "b4" / "init.ply").write_bytes(b"ply")
+    config = {"scenes": {"s": {"source": "x", "format": "e2nerf-real", "simulate": {"builtin": "chair"},
+                               "options": ["--groundtruth", "g.h5"]}},
+              "edi": {"bins": [4], "threshold": 0.3}, "evaluate": {"path_frames": 7},
+              "runs": {"r": {"method": "eigs", "options": {"steps": 5}}, "q": {"method": "3dgs"}}}  # fmt: skip
+    m = db.make_bundle(tmp_path, config, [("s", "r"), ("s", "q")], tmp_path / "bundle", edi_on_machine=("s",))
+    assert "s/b4/edi.h5" not in m["files"] and "s/b4/init.ply" in m["files"]
+    assert m["edi"] == {"s": {"bins": [4], "edi": '{"threshold":0.3}'}}
+    with h5py.File(tmp_path / "bundle" / "s" / "scene.h5") as f:
+        assert np.array_equal(f["events/binned"][()], np.arange(4096).reshape(64, 64))  # kept, losslessly
+    with pytest.raises(CheckError, match="both"):
+        db.make_bundle(tmp_path, config, [("s", "r")], tmp_path / "b2", prepare=("s",), edi_on_machine=("s",))
+    with pytest.raises(CheckError, match="no job"):
+        db.make_bundle(tmp_path, config, [("s", "r")], tmp_path / "b3", edi_on_machine=("t",))
+
+    work = tmp_path / "work"
+    tasks = db.batch_tasks(tmp_path / "bundle", tmp_path, work, m)
+    assert [t["stage"] for t in tasks] == ["edi", "train", "evaluate", "train", "evaluate"]
+    edi = tasks[0]["cmd"]
+    assert edi[edi.index("edi") + 1] == str(tmp_path / "bundle/s/scene.h5")
+    assert edi[edi.index("--config") + 1] == '{"threshold":0.3}' and edi[edi.index("--bins") + 1] == "4"
+    assert tasks[1]["after"] == 0 and tasks[3]["after"] == 0  # both jobs wait for the EDI file
+    train, evaluate = tasks[1]["cmd"], tasks[2]["cmd"]
+    assert str(work / "results/s/b4/edi.h5") in train and str(tmp_path / "bundle/s/b4/init.ply") in train
+    assert evaluate[evaluate.index("-o") + 2: evaluate.index("--resources")] == ["--path-frames", "7",
+                                                                                 "--hidden-ground-truth"]  # fmt: skip
+    two = db.batch_tasks(tmp_path / "bundle", tmp_path, work, m, threads=2)
+    for t in two:
+        assert t["cmd"][t["cmd"].index("--threads") + 1] == "2"

@@ -151,6 +151,25 @@ def test_latent_init_reproduces_the_latent_poses_and_the_trajectory_gets_gradien
         assert "event" in out.terms and math.isfinite(out.terms["event"])
 
 
+@pytest.mark.parametrize("method", ["bad-gaussians", "besplat", "evagaussians"])
+def test_a_view_sfm_did_not_register_is_left_out_not_a_singular_inverse(data, method):
+    """SfM leaves some views unregistered (NaN latent poses, d346-blocks: 3 of 150 frames); a trajectory method
+    trains on the others instead of failing on the batch inverse of its reference poses."""
+    import dataclasses
+
+    c2w, valid = data.c2w.clone(), data.valid.copy()
+    c2w[1], valid[1] = float("nan"), False
+    tr = _trainer(dataclasses.replace(data, c2w=c2w, valid=valid), method)
+    m = tr.method
+    assert 1 not in m.views.tolist() and m.n_samples() == data.n_views - 1
+    assert torch.isfinite(m.ref_inv_f).all()
+    torch.testing.assert_close(m.ref_inv_f[0].double(), torch.linalg.inv(c2w[0, 0]), atol=1e-5, rtol=1e-5)
+    out = m.step(tr.model, 0, 0, 0)
+    assert math.isfinite(float(out.loss))
+    motion = m.latent_motion(tr.model.params["means"], tr.model.params["quats"])
+    assert not motion.views[1] and torch.isfinite(motion.displacement[motion.views]).all()
+
+
 def test_trajectory_options_checked(data):
     with pytest.raises(EigsError, match="multiple of the EDI bins"):
         _trainer(data, "besplat", n_virtual=6)

@@ -61,7 +61,7 @@ class TrajectoryMethod(Method):
         self.weights = curve_weights(mode, k_ctrl, u).float().to(device)  # (n_virtual, K)
         self.ref = data.c2w[:, 0].clone()  # (V, 4, 4) float64; NaN rows of invalid views are never used
         self.ref_f = self.ref.float().to(device)
-        self.ref_inv_f = torch.linalg.inv(torch.nan_to_num(self.ref)).float().to(device)
+        self.ref_inv_f = torch.linalg.inv(self._ref_or_identity()).float().to(device)
         controls = torch.zeros(data.n_views, k_ctrl, 6, dtype=torch.float64)
         if o.init == "latent":
             t_lat = torch.linspace(0.0, 1.0, data.n_latent, dtype=torch.float64)
@@ -76,6 +76,13 @@ class TrajectoryMethod(Method):
         self.blurry = data.blurry.to(device)
         self.response = data.camera_response
         self.events = EventInputs.from_edi(data.edi, device)
+
+    def _ref_or_identity(self) -> Tensor:
+        """(V, 4, 4) float64 reference poses with the identity in place of a view SfM did not register (NaN pose;
+        such a view is never sampled), so that the batch inverse never meets a singular matrix."""
+        ok = torch.isfinite(self.ref).all(dim=(1, 2))
+        eye = torch.eye(4, dtype=self.ref.dtype).expand_as(self.ref)
+        return torch.where(ok[:, None, None], self.ref, eye)
 
     # ------------------------------------------------------------------ registry hooks
     def n_samples(self) -> int:
@@ -98,7 +105,7 @@ class TrajectoryMethod(Method):
         u = torch.arange(1, self.n_bins + 1, dtype=torch.float64) / self.n_bins
         w = curve_weights(self.mode, self.controls.shape[1], u)  # (N, K)
         xi = torch.einsum("nk,vkd->vnd", w, self.controls.detach().cpu().double())  # (V, N, 6)
-        ref = torch.nan_to_num(self.ref)  # (V, 4, 4) float64
+        ref = self._ref_or_identity()  # (V, 4, 4) float64
         cams = ref[:, None] @ se3_exp(xi)  # (V, N, 4, 4)
         moves = (ref[:, None] @ se3_exp(-xi) @ torch.linalg.inv(ref)[:, None]).float()
         x = means.detach().cpu().float()
