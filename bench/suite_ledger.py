@@ -284,7 +284,9 @@ def batch_machine(directory: Path) -> str | None:
         return None
     try:
         rep = json.loads(path.read_text())
-        return f"{rep['cpu']}, {int(rep['cores'])} cores, device_batch: {int(rep['workers'])} one-thread jobs at a time"
+        t = int(rep.get("threads_per_job", 1))  # reports written before run --threads: one thread
+        jobs = "one-thread jobs" if t == 1 else f"jobs of {t} threads"
+        return f"{rep['cpu']}, {int(rep['cores'])} cores, device_batch: {int(rep['workers'])} {jobs} at a time"
     except (ValueError, KeyError, TypeError) as err:
         raise LedgerError(f"{path}: not a device_batch report ({err})") from None
 

@@ -422,6 +422,8 @@ def test_a_device_batch_directory_names_the_machine_it_ran_on(tmp_path):
     assert batch_machine(tmp_path) is None  # a workflow directory of this machine
     (tmp_path / "batch.json").write_text('{"cpu": "Intel(R) Xeon(R) Processor", "cores": 16, "workers": 14}')
     assert batch_machine(tmp_path) == "Intel(R) Xeon(R) Processor, 16 cores, device_batch: 14 one-thread jobs at a time"
+    (tmp_path / "batch.json").write_text('{"cpu": "X", "cores": 16, "workers": 8, "threads_per_job": 2}')
+    assert batch_machine(tmp_path) == "X, 16 cores, device_batch: 8 jobs of 2 threads at a time"
     (tmp_path / "batch.json").write_text('{"cpu": "x"}')
     with pytest.raises(LedgerError, match="batch.json"):
         batch_machine(tmp_path)
