@@ -8,6 +8,9 @@ fails under ``CI=true``, so no check vanishes silently.
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 # Before anything loads OpenMP (torch): idle OpenMP threads sleep instead of spinning. pytest-xdist's workers and
@@ -46,3 +49,53 @@ def shared_real() -> Path:
 @pytest.fixture(scope="session")
 def repo_root() -> Path:
     return REPO
+
+
+@dataclass
+class ToyArtifacts:
+    """The toy scene's upstream artifacts (synth → edi → sfm → init through the workflow), read-only to tests."""
+
+    root: Path
+
+    @property
+    def scene(self) -> Path:
+        return self.root / "results" / "toy" / "scene.h5"
+
+    @property
+    def edi(self) -> Path:
+        return self.root / "results" / "toy" / "b4" / "edi.h5"
+
+    @property
+    def sfm(self) -> Path:
+        return self.root / "results" / "toy" / "b4" / "sfm"
+
+    @property
+    def init(self) -> Path:
+        return self.root / "results" / "toy" / "b4" / "init.ply"
+
+    def paths(self) -> tuple[Path, Path, Path, Path]:
+        return self.scene, self.edi, self.sfm, self.init
+
+
+@pytest.fixture(scope="session")
+def toy(tmp_path_factory) -> ToyArtifacts:
+    """`snakemake all_sfm --configfile=config/toy.yaml` in a scratch directory, made once per test run: the
+    pytest-xdist workers share it (the first one makes it under a file lock, the others wait and read it)."""
+    from filelock import FileLock
+
+    base = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        base = base.parent  # the run's folder, above each worker's own
+    root = base / "toy_shared"
+    with FileLock(str(base / "toy_shared.lock")):
+        if not (root / "DONE").is_file():
+            root.mkdir(exist_ok=True)
+            proc = subprocess.run(
+                [sys.executable, "-m", "snakemake", "all_sfm", "--cores", "2", "-s",
+                 str(REPO / "workflow" / "Snakefile"), "--directory", str(root),
+                 f"--configfile={REPO / 'config' / 'toy.yaml'}"],
+                capture_output=True, text=True, check=False, timeout=900,
+            )  # fmt: skip
+            assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+            (root / "DONE").write_text("")
+    return ToyArtifacts(root)

@@ -1,42 +1,19 @@
-"""End to end on the toy scene: `snakemake all_sfm` (synth → edi → sfm → init) in a scratch directory."""
+"""End to end on the toy scene: `snakemake all_sfm` (synth → edi → sfm → init) in a scratch directory (the shared
+``toy`` fixture of tests/conftest.py, which the training tests read too)."""
 
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 
 from eigs.artifacts.edi import read_edi
 from eigs.scene import read_scene
 
-REPO = Path(__file__).resolve().parents[1]
 
-
-def test_toy_pipeline_through_init(tmp_path):
-    proc = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "snakemake",
-            "all_sfm",
-            "--cores",
-            "2",
-            "-s",
-            str(REPO / "workflow" / "Snakefile"),
-            "--directory",
-            str(tmp_path),
-            f"--configfile={REPO / 'config' / 'toy.yaml'}",
-        ],
-        capture_output=True,
-        text=True,
-        check=False,
-        timeout=900,
-    )
-    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
-    res = tmp_path / "results" / "toy"
+def test_toy_pipeline_through_init(toy):
+    root = toy.root  # the workflow directory of the shared toy fixture (tests/conftest.py)
+    res = root / "results" / "toy"
     scene = read_scene(res / "scene.h5")
     assert (scene.camera.width, scene.camera.height, scene.n_views) == (64, 48, 8)
     assert (res / "contact_sheet.png").stat().st_size > 0
@@ -48,5 +25,5 @@ def test_toy_pipeline_through_init(tmp_path):
     assert report["mode"] == "given"
     assert (res / "b4" / "init.ply").stat().st_size > 0
     for stage in ("synth", "edi", "sfm", "init"):
-        assert any((tmp_path / "logs" / stage).iterdir()), f"no log for {stage}"
-        assert any((tmp_path / "benchmarks" / stage).iterdir()), f"no benchmark for {stage}"
+        assert any((root / "logs" / stage).iterdir()), f"no log for {stage}"
+        assert any((root / "benchmarks" / stage).iterdir()), f"no benchmark for {stage}"

@@ -87,19 +87,21 @@ def test_toy_given_mode_chain(tmp_path):
 @pytest.mark.slow
 @pytest.mark.shared
 def test_real_slider_frames_register(shared_real, tmp_path):
-    """ECD slider_depth (87 real DAVIS frames, no events, ground-truth poses): ingest → EDI (pass-through) → SfM.
-    Every frame registers; the ATE against the ground truth interpolated to the frame times is reported."""
+    """ECD slider_depth (real DAVIS frames, no events, ground-truth poses), every second of its 87 frames (44, half
+    the COLMAP time; all 87 registered too, with the same assertions): ingest → EDI (pass-through) → SfM. Every
+    frame registers; the ATE against the ground truth interpolated to the frame times is reported."""
     src = shared_real / "ecd_slider_depth"
     scene_h5, b4 = tmp_path / "scene.h5", tmp_path / "b4"
-    assert main(["ingest", "--format", "txt", str(src), "-o", str(scene_h5), "--exposure-us", "0,1000"]) == 0
+    ingest = ["ingest", "--format", "txt", str(src), "-o", str(scene_h5), "--exposure-us", "0,1000", "--views", "::2"]
+    assert main(ingest) == 0
     assert main(["edi", str(scene_h5), "-o", str(b4 / "edi.h5"), "--latent-dir", str(b4 / "latent")]) == 0
     sfm = b4 / "sfm"
     args = ["sfm", str(scene_h5), str(b4 / "edi.h5"), "-o", str(sfm), "--mode", "colmap", "--matcher", "sequential"]
     assert main([*args, "--threads", "2"]) == 0
     report = json.loads((sfm / "report.json").read_text())
-    assert report["registration"]["registered"] == report["registration"]["images"] == 87
+    assert report["registration"]["registered"] == report["registration"]["images"] == 44
     acc = report["accuracy"]
     assert acc["alignment"] == "line+orientation"  # a slider: collinear centres
-    assert acc["n"] >= 80  # frames inside the ground-truth time range
+    assert acc["n"] >= 40  # frames inside the ground-truth time range
     print(f"slider ATE {1000 * acc['ate_rmse']:.2f} mm ({acc['ate_percent_of_extent']:.3f} % of {acc['extent']:.3f} m)")
     assert acc["ate_percent_of_extent"] < 1.0

@@ -40,17 +40,15 @@ def assert_same_arrays(a: object, b: object, fields: tuple[str, ...]) -> None:
 
 
 @pytest.fixture(scope="module")
-def toy_twice(tmp_path_factory) -> tuple[Path, Path, Path, Path]:
-    """The toy scene's synth → EDI once, then SfM + init twice at 2 threads: (sfm 1, init 1, sfm 2, init 2)."""
+def toy_twice(toy, tmp_path_factory) -> tuple[Path, Path, Path, Path]:
+    """SfM + init twice at 2 threads on the toy scene's synth → EDI (the shared ``toy`` fixture):
+    (sfm 1, init 1, sfm 2, init 2)."""
     root = tmp_path_factory.mktemp("toy_twice")
-    scene_h5, b4 = root / "scene.h5", root / "b4"
-    assert main(["synth", "--scene", "toy", "-o", str(scene_h5), "--threads", "2"]) == 0
-    edi = b4 / "edi.h5"
-    assert main(["edi", str(scene_h5), "-o", str(edi), "--latent-dir", str(b4 / "latent"), "--bins", "4"]) == 0
+    latent = toy.edi.parent / "latent"
     out = []
     for run in (1, 2):
         sfm, ply = root / f"sfm{run}", root / f"init{run}.ply"
-        args = ["sfm", str(scene_h5), str(edi), "-o", str(sfm), "--latent-dir", str(b4 / "latent"), "--threads", "2"]
+        args = ["sfm", str(toy.scene), str(toy.edi), "-o", str(sfm), "--latent-dir", str(latent), "--threads", "2"]
         assert main(args) == 0
         assert main(["init", str(sfm), "-o", str(ply)]) == 0
         out += [sfm, ply]
