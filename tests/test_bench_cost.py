@@ -1,0 +1,89 @@
+"""bench/cost.py: the step-cost fit recovers known coefficients, the power law its exponent, shapes parse or fail
+on one line, and resizing a run's inputs scales images, counts and intrinsics consistently."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from bench import cost  # noqa: E402
+
+
+def test_step_fit_recovers_the_coefficients_of_exact_data():
+    a, b, c, d = 0.004, 0.05, 0.002, 0.01  # s, s/MP, s/1k G, s/(MP·1k G)
+    recs = []
+    for w, h in ((128, 96), (256, 192), (346, 260), (800, 800)):
+        for g in (5_000, 20_000, 80_000):
+            mp, kg = w * h / 1e6, g / 1e3
+            recs.append({"width": w, "height": h, "gaussians": g, "step_s": a + b * mp + c * kg + d * mp * kg})
+    coef, design = cost.fit_step_model(recs)
+    np.testing.assert_allclose(coef, [a, b, c, d], rtol=1e-8)
+    assert float((design([0.64], [50.0]) @ coef)[0]) == pytest.approx(a + b * 0.64 + c * 50 + d * 0.64 * 50)
+
+
+def test_power_law_recovers_k_and_alpha():
+    x = np.array([10.0, 40.0, 160.0])
+    k, alpha = cost.power_law(x, 3.0 * x**1.7)
+    assert k == pytest.approx(3.0) and alpha == pytest.approx(1.7)
+
+
+def test_shapes_parse_or_fail_on_one_line():
+    assert cost.parse_shape("346x260:30") == (346, 260, 30)
+    assert cost.parse_size("800X800") == (800, 800)
+    for bad in ("346x260", "346x260:1", "4x4:10", "axb:3"):
+        with pytest.raises(SystemExit, match="cost.py: --"):
+            cost.parse_shape(bad)
+
+
+def test_resized_inputs_scale_images_counts_and_intrinsics():
+    import dataclasses
+
+    import torch
+
+    from eigs.artifacts.edi import EdiResult
+
+    v, lat, h, w = 2, 3, 6, 8
+    counts = np.arange(v * lat * h * w, dtype=np.int32).reshape(v, lat, h, w)
+    edi = EdiResult(latent=np.zeros((v, lat, h, w, 3), np.float32), timestamps_us=np.zeros((v, lat), np.int64),
+                    cum_counts=counts, threshold=np.full(v, 0.3), sharp=np.zeros(v, bool),
+                    event_count=np.zeros(v, np.int64), events_per_pixel=np.zeros(v), blur_extent_px=np.zeros(v),
+                    mode="e2nerf", threshold_scope="given", event_mask=np.eye(h, w, dtype=bool))  # fmt: skip
+
+    fields = {"K": torch.tensor([[10.0, 0, 4], [0, 10.0, 3], [0, 0, 1]]), "width": w, "height": h,
+              "latent": torch.rand(v, lat, h, w, 3), "blurry": torch.full((v, h, w, 3), 0.25), "sharp_train": None,
+              "edi": edi, "held_out": object()}  # the fields `resized` reads, as TrainData has them
+    data = dataclasses.make_dataclass("Data", list(fields))(**fields)
+    out = cost.resized(data, 2 * w, 2 * h)
+    assert (out.width, out.height) == (16, 12) and out.held_out is None
+    torch.testing.assert_close(out.K, torch.tensor([[20.0, 0, 8], [0, 20.0, 6], [0, 0, 1]]))
+    assert out.blurry.shape == (v, 12, 16, 3) and torch.allclose(out.blurry, torch.full_like(out.blurry, 0.25))
+    assert out.latent.shape == (v, lat, 12, 16, 3) and out.edi.latent.shape == (v, lat, 12, 16, 3)
+    # nearest: each count is repeated on a 2×2 block, never interpolated
+    np.testing.assert_array_equal(out.edi.cum_counts, counts.repeat(2, axis=2).repeat(2, axis=3))
+    np.testing.assert_array_equal(out.edi.event_mask, np.eye(h, w, dtype=bool).repeat(2, 0).repeat(2, 1))
+
+
+def test_model_writes_its_section_from_records(tmp_path):
+    steps = tmp_path / "steps.jsonl"
+    recs = [{"run": r, "width": w, "height": h, "gaussians": g, "threads": 2, "step_s": k * (0.002 + w * h / 4e6)}
+            for r, k in (("3dgs", 1.0), ("eigs+", 5.0)) for w, h in ((128, 96), (346, 260), (800, 800))
+            for g in (5_000, 20_000)]  # fmt: skip
+    steps.write_text("".join(json.dumps(r) + "\n" for r in recs))
+    dev = tmp_path / "dev.jsonl"
+    rows = [{"run": "3dgs", "width": w, "height": h, "threads": t, "step_s": s, "machine": "X"}
+            for (w, h, t, s) in ((346, 260, 2, 0.2), (346, 260, 4, 0.1), (800, 800, 4, 0.5), (800, 800, 8, 0.25),
+                                 (800, 800, 16, 0.125))]  # fmt: skip
+    dev.write_text("".join(json.dumps(r) + "\n" for r in rows))
+    out = tmp_path / "out"
+    cost.main(["model", "--steps", str(steps), "--scaling", str(dev), "--out", str(out)])
+    data = json.loads((out / "cost.json").read_text())["data"]["runs"]
+    assert data["3dgs"]["thread_speedup"] == {"2": 1.0, "8": 4.0, "16": 8.0}  # 2→4 ×2, then 4→8 ×2, 4→16 ×4
+    assert data["eigs+"]["thread_speedup"] == {"2": 1.0}  # eigs+ was not timed on the many-core machine
+    assert data["3dgs"]["max_rel_err"] < 1e-6
+    md = (out / "cost.md").read_text()
+    assert "800×800" in md and "| 3dgs | 1000 |" in md
