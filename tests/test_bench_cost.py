@@ -14,16 +14,18 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench import cost  # noqa: E402
 
 
-def test_step_fit_recovers_the_coefficients_of_exact_data():
-    a, b, c, d = 0.004, 0.05, 0.002, 0.01  # s, s/MP, s/1k G, s/(MP·1k G)
-    recs = []
-    for w, h in ((128, 96), (256, 192), (346, 260), (800, 800)):
-        for g in (5_000, 20_000, 80_000):
-            mp, kg = w * h / 1e6, g / 1e3
-            recs.append({"width": w, "height": h, "gaussians": g, "step_s": a + b * mp + c * kg + d * mp * kg})
-    coef, design = cost.fit_step_model(recs)
-    np.testing.assert_allclose(coef, [a, b, c, d], rtol=1e-8)
-    assert float((design([0.64], [50.0]) @ coef)[0]) == pytest.approx(a + b * 0.64 + c * 50 + d * 0.64 * 50)
+def test_linear_fit_recovers_the_line_of_exact_data():
+    P = np.array([0.0123, 0.049, 0.09, 0.64])  # noqa: N806
+    a, b = cost.fit_linear(P, 0.015 + 1.4 * P)
+    assert a == pytest.approx(0.015) and b == pytest.approx(1.4)
+
+
+def test_thread_ratios_chain_the_small_size_and_the_target_size():
+    d = [{"width": w, "height": h, "threads": t, "step_s": s}
+         for (w, h, t, s) in ((346, 260, 2, 0.2), (346, 260, 4, 0.1), (800, 800, 4, 0.5), (800, 800, 8, 0.25),
+                              (800, 800, 16, 0.2))]  # fmt: skip
+    assert cost.thread_ratios(d, 2, 0.64) == {2: 1.0, 8: 4.0, 16: 5.0}
+    assert cost.thread_ratios(d[:2], 2, 0.64) == {2: 1.0}  # nothing measured at the target size
 
 
 def test_power_law_recovers_k_and_alpha():
@@ -84,6 +86,8 @@ def test_model_writes_its_section_from_records(tmp_path):
     data = json.loads((out / "cost.json").read_text())["data"]["runs"]
     assert data["3dgs"]["thread_speedup"] == {"2": 1.0, "8": 4.0, "16": 8.0}  # 2→4 ×2, then 4→8 ×2, 4→16 ×4
     assert data["eigs+"]["thread_speedup"] == {"2": 1.0}  # eigs+ was not timed on the many-core machine
-    assert data["3dgs"]["max_rel_err"] < 1e-6
+    assert all(f["max_rel_err"] < 1e-6 for f in data["3dgs"]["fits"]) and len(data["3dgs"]["fits"]) == 2
+    # the line through the exact points: 800×800 at 1× (3dgs) the 0.002 + P/4 s of the records
+    assert data["3dgs"]["fits"][0]["target_ms"] == pytest.approx(1e3 * (0.002 + 0.64 / 4))
     md = (out / "cost.md").read_text()
-    assert "800×800" in md and "| 3dgs | 1000 |" in md
+    assert "800×800" in md and "| 3dgs | 1000 | 5,000 |" in md and (out / "bench_cost.png").is_file()

@@ -28,7 +28,7 @@ def test_distortion_matches_the_quadratic_definition_forward_and_backward():
     b = w.clone().requires_grad_(True)
     got, ref = distortion(a, s, ds), _brute(b, s, ds)
     torch.testing.assert_close(got, ref, rtol=1e-12, atol=1e-15)
-    assert float(got[0]) == 0.0
+    assert got[0].item() == 0.0
     probe = torch.rand(r, generator=g, dtype=torch.float64)
     (got * probe).sum().backward()
     (ref * probe).sum().backward()
