@@ -245,6 +245,28 @@ def test_latent_motion_is_the_rigid_motion_of_the_latent_poses_at_start(data, na
     assert (m.camera_c2w is None) == (name == "eigs")
 
 
+@pytest.mark.parametrize(("name", "options"), [("e2gs", {}), ("eigs", {"pose_prior": True})])
+def test_a_view_sfm_did_not_register_exports_no_motion_and_the_run_writes(data, name, options, tmp_path):
+    """A whole view without poses (d346-blocks: view 10's five latent frames unregistered): training leaves it out
+    and its exported motion is zero, not the NaN of its poses, so the run's motion.npz validates and is written."""
+    import dataclasses
+
+    from eigs.artifacts.motion import RunMotion, write_motion
+
+    c2w, valid = data.c2w.clone(), data.valid.copy()
+    c2w[1], valid[1] = float("nan"), False
+    tr = _method(dataclasses.replace(data, c2w=c2w, valid=valid), name, **options)
+    p = tr.model.params
+    x, q = p["means"].detach()[:50], p["quats"].detach()[:50]
+    m = tr.method.latent_motion(x, q)
+    assert not m.views[1] and m.views.sum() == data.n_views - 1
+    assert torch.isfinite(m.displacement).all() and (m.displacement[1] == 0).all()
+    assert m.displacement[m.views].abs().sum() > 0  # the others keep their motion
+    run = RunMotion(name, x.numpy(), m.displacement.numpy(), m.reference_c2w.numpy(), m.views,
+                    None if m.camera_c2w is None else m.camera_c2w.numpy())  # fmt: skip
+    write_motion(run, tmp_path / "motion.npz")  # validates: raised "displacement has NaN/Inf values" before
+
+
 def test_methods_without_motion_export_none(data):
     tr = _method(data, "edi-3dgs")
     p = tr.model.params

@@ -12,7 +12,8 @@ methods); read by evaluation, which scores it against the ground-truth camera mo
 - ``reference_c2w``: (V, 4, 4) float64 each view's reference camera (latent k = 0) as training used it.
 - ``camera_c2w``: (V, N, 4, 4) float64 the camera poses at the latent times, for methods that have one (trajectory
   and fixed-pose methods); absent otherwise.
-- ``views``: (V,) bool, the views training drew steps from (valid reference pose; views EDI marked sharp included).
+- ``views``: (V,) bool, the views training drew steps from (valid reference pose; views EDI marked sharp included);
+  the displacement of a view outside them is zero (it has no motion to report).
 - ``method``: the method name.
 """
 

@@ -185,12 +185,16 @@ class MultiRender(Method):
     @torch.no_grad()
     def latent_motion(self, means: Tensor, quats: Tensor) -> LatentMotion:
         """The centre offsets of the renders at k = 1..N (ADE, with the prior when on), or for the fixed-pose
-        methods (no ADE) the scene motion of their latent cameras, P_0·P_k⁻¹ x − x."""
+        methods (no ADE) the scene motion of their latent cameras, P_0·P_k⁻¹ x − x; zero for a view training never
+        draws (no valid reference pose)."""
         x = means.detach().to(self.device)
         q = quats.detach().to(self.device)
         disp = []
+        trained = set(int(v) for v in self.views)
         for v in range(self.data.n_views):
-            if self.ade is not None:
+            if v not in trained:  # no valid reference pose (SfM did not register it): never drawn, no motion
+                disp.append(torch.zeros(self.n_latent - 1, *x.shape, dtype=x.dtype, device=x.device))
+            elif self.ade is not None:
                 disp.append(torch.stack(self.latent_offsets(v, x, q)[1][1:]))
             else:
                 disp.append(torch.stack([transform_gaussians(x, q, self.relative[v, k])[0] - x
