@@ -11,11 +11,11 @@ of ``--repeats`` steps after two warm-up steps. One JSON record per point, appen
 poses) on a built-in scene made at each ``--shapes`` W×H:V (width, height, training views; `eigs synth` with those
 overrides, not timed, kept in ``--work`` for the next call), at ``--threads`` threads, one JSON record per shape.
 
-``model``: fits ``t = a + b·P + c·G + d·P·G`` (P pixels, G Gaussians) to each run's ``steps`` records of one thread
-count (least squares on relative error), reports its error on the measured points, scales it to other thread
-counts by the step-time ratios measured on the many-core machine (``--scaling``), and predicts a run's training
-time, EDI and SfM at the E²NeRF synthetic size (800×800, 100 views); writes the "cost" section of
-docs/benchmarks.md and docs/figures/bench_cost.png.
+``model``: fits one line ``t = a + b·P`` (P megapixels) per run and Gaussian count to the ``steps`` records of one
+thread count (least squares on relative error), reports its error on the measured points and at the target size
+from the smaller sizes alone, scales it to 8 and 16 threads by the step-time ratios measured on the many-core
+machine (``--scaling``), and predicts a run's training time, EDI and SfM at the E²NeRF synthetic size (800×800,
+100 views); writes the "cost" section of docs/benchmarks.md and docs/figures/bench_cost.png.
 
 Run: ``.venv/bin/python bench/cost.py steps --results results/d346-chair --config config/davis346.yaml
 --runs 3dgs,edi-3dgs,eigs+ --sizes 128x96,346x260 --gaussians 20000 --threads 1,2 -o cost.jsonl``;
@@ -30,7 +30,6 @@ import argparse
 import dataclasses
 import json
 import os
-import platform
 import statistics
 import subprocess
 import sys
@@ -41,9 +40,8 @@ import torch
 import torch.nn.functional as F
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from bench._report import add_out_argument  # noqa: E402
+from bench._report import add_out_argument, machine  # noqa: E402
 from bench.device_batch import merged_config  # noqa: E402
-from bench.gpu_check import cpu_name  # noqa: E402
 from bench.train import resized_cloud  # noqa: E402
 from eigs.train.config import TrainConfig  # noqa: E402
 from eigs.train.data import TrainData, load_train_data  # noqa: E402
@@ -124,7 +122,7 @@ def steps(args: argparse.Namespace) -> None:
     b = res / f"b{args.bins}"
     base = load_train_data(res / "scene.h5", Path(args.edi) if args.edi else b / "edi.h5", b / "sfm", b / "init.ply")
     cloud = base.init
-    machine = f"{cpu_name() or platform.processor() or 'unknown'}, {os.cpu_count()} cores, torch {torch.__version__}"
+    host = machine()
     out = Path(args.out)
     for size in args.sizes.split(","):
         w, h = parse_size(size)
@@ -137,11 +135,14 @@ def steps(args: argparse.Namespace) -> None:
                     s = step_seconds(data, config["runs"][r], args.repeats)
                     rec = {"scene": res.name, "run": r, "method": config["runs"][r]["method"], "width": w,
                            "height": h, "views": base.n_views, "gaussians": n, "threads": threads, "step_s": s,
-                           "repeats": args.repeats, "machine": machine}  # fmt: skip
+                           "repeats": args.repeats, "machine": host}  # fmt: skip
                     with out.open("a") as f:
                         f.write(json.dumps(rec) + "\n")
                     print(f"{r:10s} {w}x{h} {n:>7,} G {threads:>2} thr: {s * 1e3:8.1f} ms/step", flush=True)
         del data
+
+
+BINS = 4  # EDI bins of `upstream` (B + 1 latent frames per view), as the suite's first B
 
 
 def parse_shape(text: str) -> tuple[int, int, int]:
@@ -166,7 +167,7 @@ def timed(cmd: list[str], log: Path) -> float:
 def upstream(args: argparse.Namespace) -> None:
     eigs = [sys.executable, "-m", "eigs.cli"]
     work = Path(args.work)
-    machine = f"{cpu_name() or platform.processor() or 'unknown'}, {os.cpu_count()} cores"
+    host = machine()
     for text in args.shapes.split(","):
         w, h, v = parse_shape(text)
         d = work / f"{args.scene}_{w}x{h}_v{v}"
@@ -176,17 +177,18 @@ def upstream(args: argparse.Namespace) -> None:
             overrides = json.dumps({"width": w, "height": h, "n_train": v})
             timed([*eigs, "synth", "--scene", args.scene, "--config", overrides, "-o", str(scene), "--threads",
                    str(args.threads)], d / "synth.log")  # fmt: skip
-        edi = d / "b4" / "edi.h5"
-        t_edi = timed([*eigs, "edi", str(scene), "-o", str(edi), "--latent-dir", str(d / "b4" / "latent"), "--bins",
-                       "4", "--threads", str(args.threads)], d / "edi.log")  # fmt: skip
-        sfm = d / "b4" / "sfm"
-        t_sfm = timed([*eigs, "sfm", str(scene), str(edi), "--latent-dir", str(d / "b4" / "latent"), "-o", str(sfm),
+        b = d / f"b{BINS}"
+        edi = b / "edi.h5"
+        t_edi = timed([*eigs, "edi", str(scene), "-o", str(edi), "--latent-dir", str(b / "latent"), "--bins",
+                       str(BINS), "--threads", str(args.threads)], d / "edi.log")  # fmt: skip
+        sfm = b / "sfm"
+        t_sfm = timed([*eigs, "sfm", str(scene), str(edi), "--latent-dir", str(b / "latent"), "-o", str(sfm),
                        "--config", '{"allow_given":false}', "--threads", str(args.threads)], d / "sfm.log")  # fmt: skip
         rep = json.loads((sfm / "report.json").read_text())
-        rec = {"scene": args.scene, "width": w, "height": h, "views": v, "frames": v * 5, "edi_s": t_edi,
+        rec = {"scene": args.scene, "width": w, "height": h, "views": v, "frames": v * (BINS + 1), "edi_s": t_edi,
                "sfm_s": t_sfm, "registered": rep["registration"]["fraction"], "matcher": rep.get("matcher"),
                "ate_percent": rep["accuracy"].get("ate_percent_of_extent"), "sfm_timings_s": rep.get("timings_s"),
-               "threads": args.threads, "machine": machine}  # fmt: skip
+               "threads": args.threads, "machine": host}  # fmt: skip
         with Path(args.out).open("a") as f:
             f.write(json.dumps(rec) + "\n")
         line = f"{w}x{h}, {v} views: EDI {t_edi:.1f} s, SfM {t_sfm:.1f} s, registered {rec['registered']:.0%}"
@@ -244,14 +246,14 @@ def model(args: argparse.Namespace) -> None:
     target_p = args.target_width * args.target_height / 1e6
     fit_rows, pred_rows, data, notes, scatter = [], [], {"runs": {}}, [], []
     for run in runs:
+        spec = (config.get("runs") or {}).get(run, {})
+        method = spec.get("method", run)
+        n_steps = int((spec.get("options") or {}).get("steps") or catalog_method(method).steps)
         scale = thread_ratios([r for r in dev if r["run"] == run], args.threads, target_p)
-        single_render = (config.get("runs") or {}).get(run, {}).get("method", run) in ("edi-3dgs", "oracle")
-        if len(scale) == 1 and single_render and "3dgs" in data["runs"]:
+        if len(scale) == 1 and method in ("edi-3dgs", "oracle") and "3dgs" in data["runs"]:
             scale = dict(data["runs"]["3dgs"]["thread_speedup"])  # one render a step, as 3dgs
             notes.append(f"{run}: 3dgs's thread ratios (one render a step; {run} was not timed on the 16 cores)")
-        spec = (config.get("runs") or {}).get(run, {})
-        steps = int((spec.get("options") or {}).get("steps") or catalog_method(spec.get("method", run)).steps)
-        data["runs"][run] = {"steps": steps, "thread_speedup": scale, "fits": []}
+        data["runs"][run] = {"steps": n_steps, "thread_speedup": scale, "fits": []}
         for g in sorted({r["gaussians"] for r in recs if r["run"] == run}):
             rr = sorted((r for r in recs if r["run"] == run and r["gaussians"] == g),
                         key=lambda r: r["width"] * r["height"])  # fmt: skip
@@ -268,16 +270,17 @@ def model(args: argparse.Namespace) -> None:
             fit_rows.append([run, f"{g:,}", len(rr), f"{a * 1e3:.1f}", f"{b * 1e3:.0f}",
                              f"{100 * np.max(np.abs(rel)):.1f} %", ext])  # fmt: skip
             t_target = a + b * target_p
-            row = [run, steps, f"{g:,}", f"{t_target * 1e3:.0f}"]
-            row += [f"{steps * t_target / scale[c] / 60:.1f}" if c in scale else "–" for c in (args.threads, 8, 16)]
+            row = [run, n_steps, f"{g:,}", f"{t_target * 1e3:.0f}"]
+            row += [f"{n_steps * t_target / scale[c] / 60:.1f}" if c in scale else "–" for c in (args.threads, 8, 16)]
             pred_rows.append(row)
             data["runs"][run]["fits"].append({"gaussians": g, "a_ms": a * 1e3, "b_ms_per_mp": b * 1e3,
                                               "max_rel_err": float(np.max(np.abs(rel))), "target_ms": t_target * 1e3})
     sizes = sorted({(r["width"], r["height"]) for r in recs}, key=lambda s: s[0] * s[1])
     body = [
         f"Issue 32, part 4. `bench/cost.py steps` timed one training step ({args.threads} threads, no "
-        "densification, median of three steps) of each run on d346-chair's artifacts, its images and event counts "
-        f"resized to {', '.join(f'{w}×{h}' for w, h in sizes)} (intrinsics scaled) and its init cloud resampled to "
+        f"densification, median of {recs[0].get('repeats', 'a few')} steps) of each run on d346-chair's artifacts, "
+        f"its images and event counts resized to {', '.join(f'{w}×{h}' for w, h in sizes)} (intrinsics scaled) "
+        "and its init cloud resampled to "
         "each Gaussian count. A step renders one view, so the view count does not enter it (it enters the steps to "
         "a plateau, EDI and SfM, below). At a fixed Gaussian count the step time is linear in the pixels, "
         "`t = a + b·P` (P megapixels; least squares on relative error); in the Gaussian count it is not a simple "
@@ -313,7 +316,12 @@ def model(args: argparse.Namespace) -> None:
         k_e, a_e = power_law(x, [r["edi_s"] for r in up])
         n = np.array([r["frames"] for r in up], float)
         k_s, a_s = power_law(n, [r["sfm_s"] for r in up])
-        x_t, n_t = args.target_views * 5 * target_p, args.target_views * 5
+        timed_up = [r for r in up if r.get("sfm_timings_s")]
+        by_size = sorted(timed_up, key=lambda r: (r["width"] * r["height"], r["views"]))
+        features = ", ".join(f"{r['sfm_timings_s']['features']:.1f} s at {r['width']}×{r['height']}"
+                             for r in (by_size[0], by_size[-1]))  # fmt: skip
+        n_t = args.target_views * (BINS + 1)
+        x_t = n_t * target_p
         body.append(
             f"EDI (B = 4, the suite's estimated mode) and COLMAP SfM (the default suite's settings; `auto` matcher: "
             f"exhaustive up to 150 latent frames, sequential beyond) of `chair` made at each size and view count, "
@@ -324,8 +332,8 @@ def model(args: argparse.Namespace) -> None:
             f"laws through these points; incremental mapping, not matching, dominates at 500 frames). At "
             f"{args.target_width}×{args.target_height} with {args.target_views} views ({n_t} latent frames): EDI "
             f"~{k_e * x_t ** a_e / 60:.0f} min, SfM ~{k_s * n_t ** a_s / 60:.0f} min from the frame count alone; the "
-            "features per image grow with the image size (features 4.8 s at 128×96, 11.1 s at 346×260), so at "
-            "800×800 SfM will take longer than that."
+            f"features per image grow with the image size (features {features}), so at "
+            f"{args.target_width}×{args.target_height} SfM will take longer than that."
         )
         data["upstream"] = {"edi_power": [k_e, a_e], "sfm_power": [k_s, a_s]}
     fig = (Path(args.out) if args.out else Path(__file__).resolve().parents[1] / "docs" / "figures") / "bench_cost.png"
@@ -389,7 +397,6 @@ def main(argv: list[str] | None = None) -> None:
     m.add_argument("--target-width", type=int, default=800)
     m.add_argument("--target-height", type=int, default=800)
     m.add_argument("--target-views", type=int, default=100)
-    m.add_argument("--target-gaussians", type=int, nargs="+", default=[20_000, 80_000])
     add_out_argument(m)
     a = ap.parse_args(argv)
     {"steps": steps, "upstream": upstream, "model": model}[a.cmd](a)

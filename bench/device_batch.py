@@ -86,24 +86,14 @@ def prepare_spec(config: dict, scene: str, bins: list[int]) -> dict:
     if plan.sfm_rule(config, scene) != "sfm":
         raise CheckError(f"--prepare: scene {scene!r}: only COLMAP SfM is prepared on the machine")
     sfm = plan.scene_sfm(config, scene)
-    edi = {k: v for k, v in (config.get("edi") or {}).items() if k != "bins"}
     return {
         "builtin": spec["builtin"],
         "overrides": compact_json(spec.get("overrides") or {}),
         "bins": sorted(bins),
-        "edi": compact_json(edi),
+        "edi": edi_config(config),
         "sfm": compact_json(sfm),
         "init": compact_json(config.get("init") or {}),
     }
-
-
-def evaluate_options(config: dict, scene: str) -> list[str]:
-    """`eigs evaluate` flags of a scene as rules/common_tables.smk ``evaluate_options`` builds them."""
-    e = config.get("evaluate") or {}
-    out = ["--path-frames", str(int(e["path_frames"]))] if "path_frames" in e else []
-    if plan.scene_hidden_ground_truth(config, scene):
-        out.append("--hidden-ground-truth")
-    return out
 
 
 def edi_config(config: dict) -> str:
@@ -132,7 +122,7 @@ def make_bundle(directory: Path, config: dict, jobs: list[tuple[str, str]], out:
         b = plan.run_bins(config, run)
         manifest["jobs"].append({"scene": scene, "run": run, "bins": b, "config": train_config_json(runs[run]),
                                  "prepared": scene in prepare,
-                                 "evaluate": evaluate_options(config, scene)})  # fmt: skip
+                                 "evaluate": plan.evaluate_flags(config, scene)})  # fmt: skip
         if scene in prepare:
             bins = sorted({*manifest["prepare"].get(scene, {}).get("bins", []), b})
             manifest["prepare"][scene] = prepare_spec(config, scene, bins)

@@ -11,12 +11,8 @@ def eval_targets():
 
 
 def evaluate_options(wildcards):
-    """`eigs evaluate` flags from the `evaluate:` config section (unset options keep the CLI's defaults)."""
-    e = config.get("evaluate", {})
-    out = [f"--path-frames {int(e['path_frames'])}"] if "path_frames" in e else []
-    if plan.scene_hidden_ground_truth(config, wildcards.scene):
-        out.append("--hidden-ground-truth")  # BRISQUE beside the test cameras (config/davis346.yaml)
-    return " ".join(out)
+    """`eigs evaluate` flags of the scene (eigs.plan.evaluate_flags)."""
+    return " ".join(plan.evaluate_flags(config, wildcards.scene))
 
 
 # --- tables and figures ---------------------------------------------------------------------------------------

@@ -83,6 +83,16 @@ def scene_hidden_ground_truth(config: Config, scene: str) -> bool:
     return "simulate" in s and "--groundtruth" in s.get("options", [])
 
 
+def evaluate_flags(config: Config, scene: str) -> list[str]:
+    """`eigs evaluate` flags of a scene from the `evaluate:` config section (unset options keep the CLI's
+    defaults), and ``--hidden-ground-truth`` for a simulated recording (BRISQUE beside the test cameras)."""
+    e = config.get("evaluate") or {}
+    out = ["--path-frames", str(int(e["path_frames"]))] if "path_frames" in e else []
+    if scene_hidden_ground_truth(config, scene):
+        out.append("--hidden-ground-truth")
+    return out
+
+
 def scene_has_ground_truth(config: Config, scene: str) -> bool:
     """Built-in and E²NeRF synthetic scenes, and simulated recordings ingested with `--groundtruth`."""
     s = config["scenes"][scene]
