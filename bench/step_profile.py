@@ -15,6 +15,7 @@ Run (a quiet machine: pause other jobs): ``.venv/bin/python bench/step_profile.p
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from collections.abc import Iterable
 from pathlib import Path
@@ -96,7 +97,7 @@ def main() -> None:
         m = profile_run(data, runs[name], args.repeats)
         measured[name] = m
         raster = m["renders fwd"] + m["raster bwd"]
-        ade = "" if m["ADE fwd+bwd"] != m["ADE fwd+bwd"] else f"{m['ADE fwd+bwd']:.1f}"
+        ade = "" if math.isnan(m["ADE fwd+bwd"]) else f"{m['ADE fwd+bwd']:.1f}"
         rows.append([f"`{name}`", f"{m['renders']:.0f}", f"{m['renders fwd']:.1f}", f"{m['raster bwd']:.1f}",
                      f"{m['project bwd']:.1f}", f"{m['rest bwd']:.1f}", f"{m['other fwd']:.1f}", f"{m['adam']:.1f}",
                      f"{m['whole step']:.1f}", ade, f"{100 * raster / m['whole step']:.0f} %"])  # fmt: skip
