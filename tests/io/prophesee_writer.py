@@ -111,8 +111,13 @@ def encode_evt3(x, y, t, p, first_high: bool = True) -> bytes:
     return struct.pack(f"<{len(words)}H", *words)
 
 
-def write_raw(path: Path, encoding: str, x, y, t, p, width: int, height: int, old_header: bool = False, **kw) -> None:
-    """A RAW file: the ``%`` header then the encoded words. ``encoding``: evt2, evt21 or evt3."""
+def write_raw(
+    path: Path, encoding: str, x, y, t, p, width: int, height: int, old_header: bool = False, t0=None, **kw
+) -> None:
+    """A RAW file: the ``%`` header then the encoded words. ``encoding``: evt2, evt21 or evt3. ``t0``: a ``% t0``
+    header line with that value (as faery writes it) and the times stored relative to it."""
+    if t0 is not None:
+        t = np.asarray(t) - int(t0)
     body = {"evt2": encode_evt2, "evt21": encode_evt21, "evt3": encode_evt3}[encoding](x, y, t, p, **kw)
     if old_header:
         ver = {"evt2": "2.0", "evt21": "2.1", "evt3": "3.0"}[encoding]
@@ -123,6 +128,8 @@ def write_raw(path: Path, encoding: str, x, y, t, p, width: int, height: int, ol
             "% camera_integrator_name Prophesee\n% date 2026-11-27 10:00:00\n"
             f"% format {name};height={height};width={width}\n% generation 4.2\n% end\n"
         )
+    if t0 is not None:
+        head = head.replace("% end\n", "") + f"% t0 {t0}\n" + ("" if old_header else "% end\n")
     path.write_bytes(head.encode("ascii") + body)
 
 

@@ -147,6 +147,23 @@ def test_aedat20_round_trip(tmp_path, capsys):
     np.testing.assert_array_equal(s.events.p, np.where(ev[3] == 1, 1, -1))
 
 
+def test_aedat20_events_only_summary(tmp_path, capsys):
+    """A file of polarity events alone: the summary says "no APS frames" and prints no empty "not stored" note."""
+    x, y, t, p = _events(500, 240, 180, seed=7)
+    rec = np.zeros(t.size, dtype=[("a", ">u4"), ("t", ">i4")])
+    rec["a"] = ((179 - y).astype(np.uint32) << 22) | ((239 - x).astype(np.uint32) << 12) | (p.astype(np.uint32) << 11)
+    rec["t"] = t
+    f = tmp_path / "ev.aedat"
+    f.write_bytes(b"#!AER-DAT2.0\r\n# AEChip: eu.seebetter.ini.chips.davis.DAVIS240C\r\n" + rec.tobytes())
+    out = tmp_path / "s.h5"
+    assert run_ingest("aedat", f, out, "--intrinsics", K_OPT) == 0
+    text = capsys.readouterr().out
+    assert "DAVIS240C; no APS frames" in text
+    assert "not stored" not in text
+    assert not any(ln.strip() in ("note:", "note:  not stored") for ln in text.splitlines())
+    np.testing.assert_array_equal(read_scene(out).events.t, t)
+
+
 @pytest.mark.parametrize(
     "chip,w,h",
     [("eu.seebetter.ini.chips.davis.DAVIS240C", 240, 180), ("eu.seebetter.ini.chips.davis.Davis346B", 346, 260)],

@@ -87,6 +87,31 @@ def test_ingest(tmp_path, capsys, encoding):
     np.testing.assert_array_equal(s.events.p, np.where(ev[3] == 1, 1, -1))
 
 
+@pytest.mark.parametrize("encoding", ["evt2", "evt3"])
+def test_t0_header_is_the_time_origin(tmp_path, capsys, encoding):
+    """faery's ``% t0 <µs>`` line: the times are stored relative to it, and come back on its absolute clock."""
+    ev = known_events(1500, PW, PH, t0=7_000_123, seed=8)
+    f = tmp_path / "rec.raw"
+    write_raw(f, encoding, *ev, PW, PH, t0=7_000_000)
+    header = read_header(f)
+    assert header.t0_us == 7_000_000
+    stored = np.concatenate([c[2] for c in decode(f, header)])  # the words themselves: relative to t0
+    np.testing.assert_array_equal(stored, ev[2] - 7_000_000)
+    out = tmp_path / "s.h5"
+    assert run_ingest("prophesee", f, out, "--intrinsics", K_OPT) == 0
+    assert "header t0 7000000 µs" in capsys.readouterr().out
+    s = read_scene(out)
+    np.testing.assert_array_equal(s.events.t, ev[2])
+    np.testing.assert_array_equal(s.events.x, ev[0])
+
+
+def test_t0_header_not_a_number_is_refused(tmp_path, capsys):
+    f = tmp_path / "rec.raw"
+    f.write_bytes(f"% format EVT3;height={PH};width={PW}\n% t0 12.5\n% end\n".encode())
+    err = expect_failure(capsys, "prophesee", f, tmp_path / "s.h5", "--intrinsics", K_OPT)
+    assert "header t0 '12.5' is not a whole number of µs" in err
+
+
 def _raw(tmp_path, encoding="evt3", n=500, **kw):
     ev = known_events(n, PW, PH, t0=1000, seed=6)
     f = tmp_path / "rec.raw"

@@ -411,10 +411,12 @@ def open_aedat_legacy_source(source: str, opts: IngestOptions) -> RawSource:
         w20, h20 = h.width, h.height
         counts: dict[str, int] = {}
         aps = _scan_aps20(path, h, w20, h20, counts)
-        src.notes.append(
-            f"AEDAT 2.0, chip {h.chip_line.split(':')[-1].strip()}; {len(aps)} APS frames (reset − signal, exposure "
-            "from the last reset read to the first signal read)"
+        frames_note = (
+            f"{len(aps)} APS frames (reset − signal, exposure from the last reset read to the first signal read)"
+            if aps
+            else "no APS frames"
         )
+        src.notes.append(f"AEDAT 2.0, chip {h.chip_line.split(':')[-1].strip()}; {frames_note}")
         if aps:
             exp = np.asarray([f.exposure for f in aps], dtype=np.int64)
             back = np.flatnonzero(np.diff(exp[:, 0]) < 0)
@@ -426,7 +428,9 @@ def open_aedat_legacy_source(source: str, opts: IngestOptions) -> RawSource:
 
         def events20(w: int, hh: int) -> Iterator[EventChunk]:
             yield from _events20(path, h, w, hh, counts)
-            src.notes.append(", ".join(f"{n} {k}" for k, n in counts.items() if n) + " not stored")
+            skipped = [f"{n} {k}" for k, n in counts.items() if n]
+            if skipped:
+                src.notes.append(", ".join(skipped) + " not stored")
 
         src.events = events20
         return src

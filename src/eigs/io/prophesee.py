@@ -7,7 +7,8 @@ No maintained PyPI decoder streams all four in bounded memory (``docs/ingestion.
 
 - **Header**: lines starting with ``%`` (up to ``% end`` when present). RAW: ``% format EVT3;height=720;width=1280``
   (or ``EVT2``, ``EVT21``), or the older ``% evt 3.0`` + ``% geometry 1280x720``. DAT: ``% Height``,
-  ``% Width``, ``% Version 2``, then one byte event type and one byte event size (8).
+  ``% Width``, ``% Version 2``, then one byte event type and one byte event size (8). A ``% t0 <µs>`` line (faery
+  writes one by default and stores times relative to it) is the time origin: added to every timestamp.
 - **EVT 2.0** (32-bit little-endian words; type = bits 31–28): CD_OFF 0x0 / CD_ON 0x1 with timestamp LSB
   (bits 27–22), x (21–11), y (10–0); EVT_TIME_HIGH 0x8 with bits 27–0 = timestamp >> 6; EXT_TRIGGER 0xA,
   OTHERS 0xE, CONTINUED 0xF (counted, not stored). t = TIME_HIGH << 6 | LSB (34 bits, µs).
@@ -63,6 +64,7 @@ class Header:
     height: int | None
     data_start: int
     lines: list[str] = field(default_factory=list)
+    t0_us: int = 0  # the ``% t0`` line's time origin (µs), added to every stored timestamp
 
 
 def _header_lines(path: Path) -> tuple[list[str], int]:
@@ -96,6 +98,7 @@ def read_header(path: Path) -> Header:
         if parts:
             kv[parts[0].lower()] = parts[1].strip() if len(parts) > 1 else ""
     width = height = None
+    t0 = _time_origin(path, kv.get("t0"))
     if path.suffix.lower() == ".dat":
         version = kv.get("version")
         if version is None or version.strip() != "2":
@@ -113,7 +116,7 @@ def read_header(path: Path) -> Header:
         ev_type, ev_size = two[0], two[1]
         if ev_type not in (0x00, 0x0C) or ev_size != 8:
             raise EigsError(path, f"event type 0x{ev_type:02x} of {ev_size} bytes; eigs reads CD events (8 bytes)")
-        return Header("dat", width, height, pos + 2, lines)
+        return Header("dat", width, height, pos + 2, lines, t0)
 
     enc = None
     fmt = kv.get("format")
@@ -148,7 +151,18 @@ def read_header(path: Path) -> Header:
         if width is not None and (gw, gh) != (width, height):
             raise EigsError(path, f"header geometry {gw}x{gh} contradicts the format line's {width}x{height}")
         width, height = gw, gh
-    return Header(enc, width, height, pos, lines)
+    return Header(enc, width, height, pos, lines, t0)
+
+
+def _time_origin(path: Path, value: str | None) -> int:
+    """The ``% t0 <µs>`` header line (faery writes it, ``T0`` or ``t0``, and stores times relative to it): a whole
+    number of µs ≥ 0, 0 without the line; anything else is an EigsError (never a silent shift)."""
+    if value is None:
+        return 0
+    text = value.strip()
+    if not text.isdigit():
+        raise EigsError(path, f"header t0 {value!r} is not a whole number of µs (the '% t0 <µs>' time origin)")
+    return int(text)
 
 
 # ------------------------------------------------------------------------------------------------ decoding state
@@ -374,6 +388,7 @@ def read_prophesee_events(
     order = TimeOrder(path, "corrupted file")
     offset = 0
     for x, y, t, p in decode(path, header, chunk_bytes, state):
+        t = t + header.t0_us if header.t0_us else t
         order(t, offset)
         xs = to_pixel(x, width, "x", where, offset)
         ys = to_pixel(y, height, "y", where, offset)
@@ -398,6 +413,8 @@ def open_prophesee_source(source: str, opts: IngestOptions) -> RawSource:
     src.n_events = size // nb if header.encoding in ("evt2", "dat") else None
     state = _State()
     src.notes.append(f"{ENCODINGS[header.encoding]}, {size:,} bytes of events")
+    if header.t0_us:
+        src.notes.append(f"header t0 {header.t0_us} µs: the time origin it declares, added to every timestamp")
     if opts.groundtruth is not None:
         src.trajectory = read_groundtruth(Path(opts.groundtruth))
 
