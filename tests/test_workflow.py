@@ -70,6 +70,52 @@ def test_invalid_config_is_rejected(tmp_path):
     assert "ValidationError" in proc.stderr + proc.stdout or "validat" in (proc.stderr + proc.stdout).lower()
 
 
+def test_every_ingest_format_plans(tmp_path):
+    """A config naming each format `eigs ingest` reads plans under `snakemake -n` (one ingest job per scene); a format
+    it does not read fails the dry run on one line naming the scene, the value and the accepted formats."""
+    from eigs.io import FORMATS
+
+    assert len(FORMATS) == 9
+    scenes = {}
+    for fmt in FORMATS:
+        source = tmp_path / f"rec-{fmt}"
+        source.write_bytes(b"")  # a dry run never reads it
+        scenes[f"s-{fmt}"] = {"source": str(source), "format": fmt, "options": ["--intrinsics", "60,60,32,24"]}
+    cfg = tmp_path / "all_formats.yaml"
+    cfg.write_text(yaml.safe_dump({"scenes": scenes, "threads": 1, "runs": {"3dgs": {"method": "3dgs"}}}))
+    proc = snakemake("all", "-n", "--cores", "1", f"--configfile={cfg}", "--directory", str(tmp_path))
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    counts = job_counts(proc.stdout)
+    assert counts["ingest"] == 9 and counts["train"] == 9, counts
+    for fmt in FORMATS:
+        assert f"--format {fmt} --name s-{fmt}" in proc.stdout
+
+    scenes["s-bad"] = {"source": str(tmp_path / "rec-h5"), "format": "hdf5"}
+    cfg.write_text(yaml.safe_dump({"scenes": scenes, "threads": 1}))
+    proc = snakemake("all", "-n", "--cores", "1", f"--configfile={cfg}", "--directory", str(tmp_path))
+    assert proc.returncode != 0
+    line = f"config: scene s-bad: format 'hdf5' is not one `eigs ingest` reads ({', '.join(FORMATS)})"
+    assert line in proc.stdout + proc.stderr
+
+
+def test_schema_cannot_drift_from_the_ingest_formats():
+    """The schema types `format` but lists no formats: the list lives in eigs.io.FORMATS alone (the CLI's choices
+    and the planner's check read it), so a format added to the code is accepted by the workflow at once."""
+    from eigs.io import FORMATS
+    from eigs.io.cli import add_arguments
+
+    schema = yaml.safe_load((REPO / "workflow" / "schemas" / "config.schema.yaml").read_text())
+    ingested = schema["properties"]["scenes"]["additionalProperties"]["oneOf"][1]["properties"]
+    assert ingested["format"]["type"] == "string" and "enum" not in ingested["format"]
+    assert "eigs.io.FORMATS" in ingested["format"]["description"]
+    import argparse
+
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    choices = next(a.choices for a in parser._actions if a.dest == "format")
+    assert tuple(choices) == FORMATS
+
+
 def test_builtin_and_ingested_scenes_do_not_clash(tmp_path):
     """Each results/<scene>/scene.h5 is claimed by exactly one rule (synth or ingest)."""
     src = tmp_path / "data"

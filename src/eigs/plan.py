@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from eigs.events.options import DEFAULT_BINS
+from eigs.io import FORMATS
 from eigs.sfm.options import SfmConfig
 from eigs.train import catalog
 
@@ -185,7 +186,13 @@ def field_runs(config: Config) -> list[str]:
 
 
 def check(config: Config) -> None:
-    """Raise the config errors of the scenes' SfM sections and the runs' scene lists now, not when a rule asks."""
+    """Raise the config errors of the scenes' formats and SfM sections and the runs' scene lists now, not when a
+    rule asks."""
+    for scene in ingested_scenes(config):
+        fmt = config["scenes"][scene].get("format")
+        if fmt not in FORMATS:
+            accepted = ", ".join(FORMATS)
+            raise ValueError(f"config: scene {scene}: format {fmt!r} is not one `eigs ingest` reads ({accepted})")
     for scene in all_scenes(config):
         sfm_rule(config, scene)
     for run in runs(config):

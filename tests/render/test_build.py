@@ -39,6 +39,20 @@ def test_cache_key_follows_the_sources(tmp_path, monkeypatch) -> None:
     assert _backend.cache_dir() == tmp_path / "c"
 
 
+def test_two_checkouts_do_not_share_a_build(tmp_path, monkeypatch) -> None:
+    """The same sources in two folders get two builds: one shared build file would name one folder's sources and the
+    other checkout's every load would rebuild it."""
+    hashes = []
+    for checkout in ("a", "b"):
+        src = tmp_path / checkout / "csrc"
+        src.mkdir(parents=True)
+        for name in _backend.SOURCES + _backend.HEADERS:
+            (src / name).write_bytes((_backend.CSRC / name).read_bytes())
+        monkeypatch.setattr(_backend, "CSRC", src)
+        hashes.append(_backend.source_hash())
+    assert hashes[0] != hashes[1]
+
+
 def test_isa_detection() -> None:
     isas = _backend.available_isas()
     assert isas[0] == "baseline" and set(isas) <= {"baseline", "avx2", "avx512"}

@@ -4,24 +4,14 @@ from __future__ import annotations
 
 import argparse
 
-HELP = "read E²NeRF layouts, HDF5/text/AEDAT/Prophesee/NumPy event recordings, ROS bags and frames into a scene file"
+from eigs.io import FORMATS  # import-light: the package holds no reader imports at module level
 
-_FORMATS = (  # == eigs.io.FORMATS (kept import-light)
-    "e2nerf-synthetic",
-    "e2nerf-real",
-    "h5",
-    "txt",
-    "aedat4",
-    "rosbag",
-    "prophesee",
-    "aedat",
-    "numpy",
-)
+HELP = "read E²NeRF layouts, HDF5/text/AEDAT/Prophesee/NumPy event recordings, ROS bags and frames into a scene file"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.epilog = "Formats, conversions and the frames sidecar: docs/ingestion.md."
-    parser.add_argument("--format", required=True, choices=_FORMATS, help="source format")
+    parser.add_argument("--format", required=True, choices=FORMATS, help="source format")
     parser.add_argument("source", help="dataset folder or event file")
     parser.add_argument("-o", "--output", required=True, metavar="SCENE.h5", help="scene file to write (atomically)")
     parser.add_argument("--name", help="scene name (default: the source folder or file stem)")

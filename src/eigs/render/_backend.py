@@ -34,10 +34,15 @@ _module: ModuleType | None = None
 
 
 def source_hash() -> str:
-    """Hash of the C++ sources, headers, flags and torch version (12 hex digits)."""
+    """Hash of the C++ sources, headers, flags, torch version and the sources' folder (12 hex digits).
+
+    The folder is part of it because the build file names the sources by path: two checkouts with the same sources
+    sharing one cache would otherwise rewrite each other's build file, and each load would rebuild (measured: a
+    load waiting 133 s on the other checkout's rebuild)."""
     import torch
 
     h = hashlib.sha256()
+    h.update(str(CSRC).encode())
     for name in SOURCES + HEADERS:
         h.update(name.encode())
         h.update((CSRC / name).read_bytes())
