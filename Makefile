@@ -7,7 +7,7 @@ CORES  ?= 2
 CONFIG ?= config/config.yaml
 PYTEST_WORKERS ?= 2
 
-.PHONY: venv demo reproduce toy cluster test test-cluster lint bench gpu-bundle gpu-wheels clean-results
+.PHONY: venv demo reproduce toy cluster test test-cluster kill-sweep lint bench gpu-bundle gpu-wheels clean-results
 
 # Bootstrap .venv with pinned dependencies. torch is installed first and pinned (2.13.0 CPU on our machines):
 # an unpinned torch pulls a multi-GB CUDA build. The package is installed editable without build isolation
@@ -58,6 +58,12 @@ lint: venv
 
 test: venv lint
 	$(BIN)/pytest -n $(PYTEST_WORKERS) --dist loadfile
+
+# The kill sweep (tests/faults/test_kill.py): the kill config's workflow killed with SIGKILL at 21 seeded instants
+# that hit every rule, recovered each time as README.md says, ending with the uninterrupted run's tables. `make test`
+# runs six of those instants.
+kill-sweep: venv
+	EIGS_KILL_INSTANTS=21 $(BIN)/pytest -p no:xdist -s tests/faults/test_kill.py
 
 # The live SLURM test (root: installs SLURM + munge, starts a one-node cluster; docs/cluster.md). CI runs it.
 test-cluster: venv

@@ -67,6 +67,16 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _unraisable(info) -> None:  # noqa: ANN001 (sys.UnraisableHookArgs)
+    """A full disk also fails the closing writes of objects being freed (h5py's file handles): the error line says
+    it once; other unraisable exceptions are printed as Python does."""
+    from eigs.util.atomic import is_disk_full
+
+    if info.exc_value is not None and is_disk_full(info.exc_value):
+        return
+    sys.__unraisablehook__(info)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -79,6 +89,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         stream=sys.stderr,
     )
     keep_freed_memory()  # a step's large temporaries reuse pages instead of faulting fresh ones (eigs.util.memory)
+    sys.unraisablehook = _unraisable
     try:
         if args.threads is not None:
             from eigs.util.threads import set_threads
@@ -87,6 +98,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         code = args._run(args)
     except EigsError as err:
         print(f"eigs {args.command}: error: {err}", file=sys.stderr)
+        return 2
+    except (OSError, RuntimeError) as err:  # a full disk outside an atomic write (which names its artifact itself)
+        from eigs.util.atomic import disk_full_error, free_bytes, is_disk_full
+
+        target = getattr(args, "output", None) or getattr(err, "filename", None)
+        if not is_disk_full(err, target):
+            raise
+        print(f"eigs {args.command}: error: {disk_full_error(target or '.', free_bytes(target or '.'))}",
+              file=sys.stderr)  # fmt: skip
         return 2
     except KeyboardInterrupt:
         print(f"eigs {args.command}: interrupted", file=sys.stderr)

@@ -17,7 +17,7 @@ import numpy as np
 
 from eigs.artifacts._h5 import open_artifact
 from eigs.errors import H5_READ_ERRORS, EigsError
-from eigs.util.atomic import atomic_path
+from eigs.util.atomic import atomic_path, ensure_space, nbytes_of
 
 FORMAT_NAME = "eigs-edi"
 FORMAT_VERSION = 1
@@ -166,6 +166,7 @@ class EdiResult:
 def write_edi(result: EdiResult, path: str | os.PathLike) -> None:
     """Validate and write atomically."""
     result.validate(path)
+    ensure_space(path, nbytes_of(result))
     with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
         f.attrs.update(
             format=FORMAT_NAME,

@@ -17,7 +17,7 @@ import numpy as np
 
 from eigs.artifacts._h5 import open_artifact
 from eigs.errors import H5_READ_ERRORS, EigsError
-from eigs.util.atomic import atomic_path
+from eigs.util.atomic import atomic_path, ensure_space, nbytes_of
 
 POSES_FORMAT = "eigs-sfm-poses"
 TEST_FORMAT = "eigs-sfm-test-cameras"
@@ -89,6 +89,7 @@ class LatentPoses:
 
 def write_poses(poses: LatentPoses, path: str | os.PathLike) -> None:
     poses.validate(path)
+    ensure_space(path, nbytes_of(poses))
     with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
         f.attrs.update(
             format=POSES_FORMAT, version=FORMAT_VERSION, mode=poses.mode, width=poses.width, height=poses.height
@@ -167,6 +168,7 @@ class TestCameras:
 
 def write_test_cameras(cams: TestCameras, path: str | os.PathLike) -> None:
     cams.validate(path)
+    ensure_space(path, nbytes_of(cams))
     with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
         f.attrs.update(format=TEST_FORMAT, version=FORMAT_VERSION, width=cams.width, height=cams.height)
         f.attrs["methods"] = ",".join(f"{k}={v}" for k, v in METHODS.items())

@@ -35,7 +35,7 @@ from eigs.scene.validate import (
     validate,
     validate_header,
 )
-from eigs.util.atomic import atomic_path
+from eigs.util.atomic import atomic_path, ensure_space, nbytes_of
 
 EVENT_CHUNK_ROWS = 1 << 20  # HDF5 chunk length for event arrays
 
@@ -89,6 +89,7 @@ class SceneWriter:
     # -- context management -------------------------------------------------------------------------
     def __enter__(self) -> SceneWriter:
         validate_header(str(self.path), self.header)
+        ensure_space(self.path, nbytes_of(self.header))
         self._tmp = self._stack.enter_context(atomic_path(self.path))
         self._f = self._stack.enter_context(h5py.File(self._tmp, "w"))
         self._write_header()
@@ -174,6 +175,7 @@ class SceneWriter:
         cam = self.header.camera
         self._last_t = check_event_chunk(str(self.path), x, y, t, p, cam.width, cam.height, self._last_t)
         self._event_datasets()
+        ensure_space(self.path, nbytes_of(x, y, t, p))
         n, m = self._n, t.shape[0]
         for name, a in (("x", x), ("y", y), ("t", t), ("p", p)):
             ds = self._f[f"events/{name}"]

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from eigs.errors import EigsError
-from eigs.util.atomic import atomic_path
+from eigs.util.atomic import FULL_BELOW, atomic_path, disk_full_error, free_bytes
 
 
 def srgb_to_linear(v: np.ndarray) -> np.ndarray:
@@ -50,5 +50,8 @@ def write_png(path: str | os.PathLike, image: np.ndarray) -> None:
     elif a.ndim != 2:
         raise ValueError(f"expected (H, W), (H, W, 1), (H, W, 3) or (H, W, 4), got {a.shape}")
     with atomic_path(Path(path)) as tmp:
-        if not cv2.imwrite(str(tmp), a):
+        if not cv2.imwrite(str(tmp), a):  # OpenCV says no more than False (libpng: "Write Error")
+            free = free_bytes(tmp)
+            if free is not None and free < FULL_BELOW:
+                raise disk_full_error(path, free)
             raise EigsError(path, "could not write the PNG")

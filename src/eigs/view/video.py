@@ -179,6 +179,7 @@ def encode_mp4(frames: Iterable[np.ndarray], path: str | os.PathLike, fps: float
             if writer is None:
                 raise EigsError(path, "no frames to encode")
             writer.close()
+            _check_written(tmp, path, count)
         except (OSError, RuntimeError) as err:
             lines = [s for s in str(err).strip().splitlines() if s.strip()]
             raise EigsError(path, f"ffmpeg failed: {lines[-1] if lines else type(err).__name__}") from None
@@ -186,6 +187,23 @@ def encode_mp4(frames: Iterable[np.ndarray], path: str | os.PathLike, fps: float
             if writer is not None:
                 writer.close()
     return count
+
+
+def _check_written(tmp: Path, path: str | os.PathLike, count: int) -> None:
+    """The temporary video read back before it becomes ``path``: ffmpeg can exit without an error on a full disk
+    and leave a file that no player opens (measured: "Invalid data found when processing input")."""
+    from eigs.util.atomic import FULL_BELOW, disk_full_error, free_bytes
+
+    try:
+        frames = probe_mp4(tmp)["frames"]
+    except EigsError:
+        frames = None
+    if frames == count:
+        return
+    free = free_bytes(tmp)
+    if free is not None and free < FULL_BELOW:
+        raise disk_full_error(path, free)
+    raise EigsError(path, f"ffmpeg wrote {'an unreadable video' if frames is None else f'{frames} of {count} frames'}")
 
 
 def probe_mp4(path: str | os.PathLike) -> dict:
