@@ -104,6 +104,8 @@ def test_generator_adds_noise_to_the_blurry_frames_only():
     again = generate("toy", {**small, "frame_noise": "none"}, show_progress=False).scene
     noisy = generate("toy", {**small, "frame_noise": "davis346"}, show_progress=False).scene
     np.testing.assert_array_equal(clean.frames.blurry, again.frames.blurry)
+    assert clean.source == again.source == "eigs synth --scene toy (seed 2)"
+    assert noisy.source == "eigs synth --scene toy (seed 2, frame noise davis346)"
     # the events, the ground truth and the poses do not move; the frames differ by about the noise
     np.testing.assert_array_equal(clean.events.t, noisy.events.t)
     np.testing.assert_array_equal(clean.events.x, noisy.events.x)

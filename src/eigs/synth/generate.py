@@ -309,7 +309,9 @@ def generate(
         background=background,
         contrast_threshold=float(p["contrast_threshold"]),
         source=f"eigs synth --scene {name} (seed {p['seed']}"
-        + (f", preset {p['preset']})" if p["preset"] else ")"),
+        + (f", preset {p['preset']}" if p["preset"] else "")
+        + (f", frame noise {p['frame_noise']}" if aps is not None else "")
+        + ")",
         frames=Frames(blurry=blurry, exposure_us=exposures.astype(np.int64)),
         events=events,
         poses=Poses(latent_c2w=latent_c2w, latent_t_us=latent_t.astype(np.int64), source="ground-truth"),
