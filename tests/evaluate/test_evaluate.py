@@ -81,6 +81,23 @@ def test_metrics_agree_with_eigs_metric_on_the_saved_renders(synthetic, capsys, 
             assert got == pytest.approx(m[f"ssim_{mode}"], abs=1e-5)
         got = cli_mean(capsys, "lpips", r / kind, r / f"gt_{kind}", "--net", "alex", "--resources", resources_dir)
         assert got == pytest.approx(m["lpips_alex"], abs=1e-5)
+        assert cli_mean(capsys, "sharpness", r / kind, r / f"gt_{kind}") == pytest.approx(m["sharpness"], rel=1e-6)
+        assert m["sharpness_undefined"] == 0 and 0 < m["sharpness"]
+
+
+def test_a_flat_ground_truth_has_no_sharpness_and_is_counted(resources_dir, caplog):
+    from eigs.evaluate.core import group_means, score_pair
+
+    rng = np.random.default_rng(3)
+    render = rng.integers(0, 256, (32, 40, 3), dtype=np.uint8)
+    textured = score_pair(render, rng.integers(0, 256, (32, 40, 3), dtype=np.uint8), str(resources_dir))
+    flat = score_pair(render, np.full((32, 40, 3), 40, dtype=np.uint8), str(resources_dir))
+    assert np.isnan(flat["sharpness"]) and np.isfinite(flat["psnr"]) and textured["sharpness"] > 0
+    with caplog.at_level("WARNING", logger="eigs.evaluate"):
+        g = group_means("novel", [textured, flat])
+    assert g["n"] == 2 and g["sharpness_undefined"] == 1 and g["sharpness"] == textured["sharpness"]
+    assert g["psnr"] == pytest.approx((textured["psnr"] + flat["psnr"]) / 2)
+    assert "1 of 2 views have a flat ground truth" in caplog.text
 
 
 def test_per_image_csv_rows(synthetic):

@@ -44,6 +44,19 @@ def test_files_print_one_number(images, capsys):
     assert _last(capsys)[0] == pytest.approx(ssim(outs[0], refs[0], "deblurnerf"), abs=1e-6)
 
 
+def test_sharpness_of_files_and_a_flat_reference_is_an_error(images, capsys, tmp_path):
+    from eigs.metrics.sharpness import hf_ratio
+
+    root, outs, refs = images
+    assert main(["metric", "sharpness", str(root / "out/001.png"), str(root / "ref/001.png")]) == 0
+    value, lines = _last(capsys)
+    assert len(lines) == 1 and value == pytest.approx(hf_ratio(outs[1], refs[1]), rel=1e-6)
+    flat = _write(tmp_path / "flat.png", np.full((40, 48, 3), 90, dtype=np.uint8))
+    assert main(["metric", "sharpness", str(root / "out/001.png"), str(flat)]) == 2
+    err = capsys.readouterr().err
+    assert "out/001.png: the reference has no power above 0.25 cycles/pixel" in err and "undefined" in err
+
+
 def test_directories_give_csv_and_mean(images, capsys, tmp_path):
     root, outs, refs = images
     csv = tmp_path / "per_image.csv"

@@ -11,7 +11,7 @@ import re
 import pytest
 
 from eigs.cli import main
-from eigs.tables.build import build_tables, rank
+from eigs.tables.build import COLUMNS, build_tables, rank
 from eigs.tables.collect import brace_pattern, summarise
 from eigs.tables.figures import pareto_front
 from eigs.tables.paper import TABLES
@@ -32,7 +32,9 @@ MAPPING = {
 }
 
 
-def write_metrics(root, run, scene, method, psnr, ssim, lpips, seconds, gt=True, brisque=None):
+def write_metrics(root, run, scene, method, psnr, ssim, lpips, seconds, gt=True, brisque=None, sharp=True):
+    """A metrics.json; ``sharp``: with the sharpness (1 − LPIPS here, novel views; 0.5 blur views), as runs
+    evaluated since issue 43 have it, else without the key, as the ledger's older ones."""
     d = root / scene / "b4" / "eval" / run
     d.mkdir(parents=True)
     metrics = ({"novel": {"n": 2, "psnr": psnr, "ssim_3dgs": ssim, "ssim_skimage-gaussian": ssim - 0.01,
@@ -40,6 +42,9 @@ def write_metrics(root, run, scene, method, psnr, ssim, lpips, seconds, gt=True,
                 "blur": {"n": 2, "psnr": psnr + 1, "ssim_3dgs": ssim, "ssim_skimage-gaussian": ssim,
                          "ssim_deblurnerf": ssim, "lpips_alex": lpips}}
                if gt else {"all": {"n": 9, "brisque": brisque, "brisque_undefined": 0}})  # fmt: skip
+    if gt and sharp:
+        metrics["novel"].update(sharpness=1 - lpips, sharpness_undefined=0)
+        metrics["blur"].update(sharpness=0.5, sharpness_undefined=0)
     doc = {"format": "eigs-metrics", "version": 1, "run": run, "method": method, "scene": scene, "bins": 4,
            "run_dir": f"results/{scene}/b4/{run}", "ground_truth": gt, "metrics": metrics,
            "train_seconds": seconds, "steps": 100, "n_gaussians": 1000, "fps": 50.0}  # fmt: skip
@@ -93,6 +98,24 @@ def test_best_and_second_best_exclude_the_oracle(tables):
     assert row(t1, "3dgs").cells["ssim"].rank == 2
     # BRISQUE: eigs 30 best, 3dgs 40 second
     assert row(t1, "eigs").cells["brisque"].rank == 1 and row(t1, "3dgs").cells["brisque"].rank == 2
+
+
+def test_sharpness_is_a_shown_unranked_column_and_missing_where_a_run_predates_it(tables, metrics_files, tmp_path):
+    t1 = tables["table1"]
+    keys = [c.key for c in t1.columns if c.shown]
+    assert keys.index("sharpness") == keys.index("lpips") + 1
+    eigs = row(t1, "eigs")
+    assert eigs.cells["sharpness"].ours == pytest.approx(0.89) and eigs.cells["sharpness_blur"].ours == 0.5
+    assert all(r.cells["sharpness"].rank is None and r.cells["sharpness"].paper is None for r in t1.rows)
+    assert "| 0.890 (–) |" in to_markdown(t1)
+    for name, columns in COLUMNS.items():  # every table has it: shown in Table I and the ladder, else in the CSV
+        col = next(c for c in columns if c.key == "sharpness")
+        assert col.shown == (name in ("table1", "ladder")) and col.decimals == 3
+    # a run evaluated before the sharpness existed: its cell is empty, the others as before
+    old = write_metrics(tmp_path / "old", "old", "alpha", "3dgs", 20.0, 0.8, 0.3, 10.0, sharp=False)
+    t = {t.name: t for t in build_tables({"table1": {"3dgs": "old"}}, summarise([old]))}["table1"]
+    assert row(t, "3dgs").cells["sharpness"].ours is None and row(t, "3dgs").cells["psnr"].ours == 20.0
+    assert "| – (–) |" in to_markdown(t)
 
 
 def test_distance_to_oracle(tables):

@@ -1,9 +1,12 @@
 """Evaluate one run folder: render, quantise to 8 bits, save the PNGs, score them.
 
 Synthetic scenes (ground-truth sharp images and ``sfm/test_cameras.h5``): every test camera is rendered, and PSNR,
-SSIM in every lineage (:data:`eigs.metrics.pixel.SSIM_MODES`) and LPIPS-alex are computed against the ground truth,
-separately for blur views (kind 0: a training view's ground truth at its first latent time, the reference pose) and
-novel views (kind 1). Cameras come only from ``test_cameras.h5`` (docs/sfm.md, "Test cameras").
+SSIM in every lineage (:data:`eigs.metrics.pixel.SSIM_MODES`), LPIPS-alex and the sharpness (the high-frequency power
+ratio, :func:`eigs.metrics.sharpness.hf_ratio`) are computed against the ground truth, separately for blur views
+(kind 0: a training view's ground truth at its first latent time, the reference pose) and novel views (kind 1).
+Cameras come only from ``test_cameras.h5`` (docs/sfm.md, "Test cameras"). A view whose ground truth is flat above
+0.25 cycles/pixel has no sharpness: it is counted in ``sharpness_undefined``, left out of the mean (an empty cell in
+``per_image.csv``) and logged, never scored silently.
 
 Scenes without ground truth (and, with ``hidden_ground_truth``, simulated recordings through the real-data path
 whose ground truth was kept aside for scoring, beside their test-camera scores): BRISQUE of renders at the training
@@ -34,6 +37,7 @@ log = logging.getLogger("eigs.evaluate")
 
 SSIM_TABLE_MODE = "3dgs"  # the lineage the tables show (docs/metrics.md)
 LPIPS_NET = "alex"
+SHARPNESS = "sharpness"  # the high-frequency power ratio (eigs.metrics.sharpness.hf_ratio)
 KIND_NAMES = {0: "blur", 1: "novel"}
 DEFAULT_PATH_FRAMES = 120  # E²NeRF's real protocol: 120 path renders beside the blur views
 
@@ -62,14 +66,37 @@ def _mean(values: list[float]) -> float:
 
 
 def score_pair(img: np.ndarray, ref: np.ndarray, resources: str | None) -> dict[str, float]:
-    """PSNR, SSIM in every lineage and LPIPS-alex of one uint8 render against its uint8 ground truth."""
+    """PSNR, SSIM in every lineage, LPIPS-alex and the sharpness of one uint8 render against its uint8 ground truth;
+    ``sharpness`` is NaN where the ground truth is flat in its band (the caller counts and logs it)."""
     from eigs.metrics.perceptual import lpips
     from eigs.metrics.pixel import SSIM_MODES, psnr, ssim
+    from eigs.metrics.sharpness import UndefinedSharpness, hf_ratio
 
     out = {"psnr": psnr(img, ref)}
     for mode in SSIM_MODES:
         out[f"ssim_{mode}"] = ssim(img, ref, mode)
     out[f"lpips_{LPIPS_NET}"] = lpips(img, ref, LPIPS_NET, resources)
+    try:
+        out[SHARPNESS] = hf_ratio(img, ref)
+    except UndefinedSharpness:
+        out[SHARPNESS] = math.nan
+    return out
+
+
+def group_means(name: str, per: list[dict[str, float]]) -> dict[str, Any]:
+    """The ``name`` group of metrics.json from its views' scores: ``n``, the mean of each score, and
+    ``sharpness_undefined``, the views without a sharpness (flat ground truth), which its mean leaves out."""
+    out: dict[str, Any] = {"n": len(per)}
+    for k in per[0]:
+        values = [p[k] for p in per]
+        if k == SHARPNESS:
+            defined = [v for v in values if math.isfinite(v)]
+            if len(defined) < len(values):
+                log.warning("%s: %d of %d views have a flat ground truth; sharpness undefined for them, left out of "
+                            "the mean", name, len(values) - len(defined), len(values))  # fmt: skip
+            out[k], out[f"{k}_undefined"] = _mean(defined), len(values) - len(defined)
+        else:
+            out[k] = _mean(values)
     return out
 
 
@@ -140,7 +167,7 @@ def evaluate_run(
                     rows.append({"set": name, "image": f"{row:04d}.png", "view": int(tc.view[i]),
                                  "camera": METHODS.get(int(tc.method[i]), "?"), **s})  # fmt: skip
                 if per:
-                    groups[name] = {"n": len(per), **{k: _mean([p[k] for p in per]) for k in per[0]}}
+                    groups[name] = group_means(name, per)
         if not has_gt or hidden_ground_truth:
             if not poses.valid[:, 0].any():
                 raise EigsError(sfm_dir, "no training view has a valid reference pose (latent k = 0)")

@@ -5,9 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-HELP = "image-quality metric (psnr, ssim, lpips, brisque) of an image or a directory of images"
-METRICS = ("psnr", "ssim", "lpips", "brisque")
-FULL_REFERENCE = ("psnr", "ssim", "lpips")
+HELP = "image-quality metric (psnr, ssim, lpips, sharpness, brisque) of an image or a directory of images"
+METRICS = ("psnr", "ssim", "lpips", "sharpness", "brisque")
+FULL_REFERENCE = ("psnr", "ssim", "lpips", "sharpness")
 BRISQUE_KINDS = {"original": "brisque", "opencv": "brisque_opencv"}  # variant → resource kind
 
 
@@ -19,9 +19,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("metric", choices=METRICS, help="which metric")
     parser.add_argument("image", type=Path, help="image file, or directory of images")
-    parser.add_argument(
-        "reference", type=Path, nargs="?", help="reference file or directory (psnr, ssim, lpips; not brisque)"
-    )
+    parser.add_argument("reference", type=Path, nargs="?", help="reference file or directory (not for brisque)")
     parser.add_argument(
         "--mode",
         choices=("3dgs", "skimage-gaussian", "deblurnerf"),
@@ -124,6 +122,11 @@ def run(args: argparse.Namespace) -> int:
 
         def score(a, b):
             return lpips(a, b, net=args.net, resources_dir=args.resources)
+    elif args.metric == "sharpness":  # the high-frequency power ratio of the image against the reference
+        from eigs.metrics.sharpness import hf_ratio
+
+        def score(a, b):
+            return hf_ratio(a, b)
     else:
         from eigs.metrics.noreference import brisque
 

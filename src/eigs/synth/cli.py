@@ -68,6 +68,14 @@ def _list() -> str:
     for name, values in PRESETS.items():
         lines.append(f"  {name}:")
         lines += [f"    {k} = {v!r}    # {PRESET_SOURCES[name][k]}" for k, v in values.items()]
+    from dataclasses import asdict
+
+    from eigs.synth.frame_noise import MODELS, SOURCES
+
+    lines.append("frame noise models (\"frame_noise\": NAME; default none; docs/synthetic.md, 'Frame noise'):")
+    for name, model in MODELS.items():
+        lines.append(f"  {name}:")
+        lines += [f"    {k} = {v:.6g}    # {SOURCES[name][k]}" for k, v in asdict(model).items()]
     return "\n".join(lines)
 
 

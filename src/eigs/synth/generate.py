@@ -5,14 +5,16 @@
 
 The intensity domain is stated once (docs/synthetic.md): textures are linearised on load, the scene is rendered
 in linear intensity in [0, 1], the blurry frame is the mean of the exposure's sharp sub-frames in linear
-intensity, frames are stored 8-bit (``camera_response`` linear by default, sRGB optional), and events come from
-ln(Y + 1e-3) with Y the BT.601 luma of the linear sub-frames.
+intensity (with ``frame_noise: davis346``, a DAVIS346's APS noise added to it: :mod:`eigs.synth.frame_noise`), frames
+are stored 8-bit (``camera_response`` linear by default, sRGB optional), and events come from ln(Y + 1e-3) with Y the
+BT.601 luma of the linear sub-frames.
 """
 
 from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -133,6 +135,22 @@ def _sensor(p: dict[str, Any]) -> SensorParams:
     )
 
 
+def _frame_noise(
+    p: dict[str, Any], root: np.random.Generator, height: int, width: int, channels: int
+) -> Callable[[np.ndarray], np.ndarray] | None:
+    """The APS noise of ``p["frame_noise"]`` (:mod:`eigs.synth.frame_noise`) as a function of one exposure's clean
+    mean linear frame ``(H, W, C)``, or None (``none``). Its generator is the scene seed's third child, spawned only
+    here, so noise-free scenes draw exactly what they drew before; the sensor's fixed pattern is drawn once, first."""
+    from eigs.synth.frame_noise import MODELS, draw_fixed_pattern, expose
+
+    if p["frame_noise"] == "none":
+        return None
+    model = MODELS[p["frame_noise"]]
+    rng = np.random.default_rng(root.bit_generator.seed_seq.spawn(1)[0])
+    pattern = draw_fixed_pattern(model, height, width, channels, rng)
+    return lambda x: expose(x, model, pattern, rng)
+
+
 def build_path(p: dict[str, Any], spec: SceneSpec, rng: np.random.Generator) -> tuple[CameraPath, Orbit]:
     """Ground-truth path of the training views and the novel-view orbit (in-between azimuths, other elevations).
     The views of :func:`still_view_indices` (``still_views``) are held still during their exposures."""
@@ -181,6 +199,7 @@ def generate(
                        texture_size=p["texture_size"])
     root = np.random.default_rng(p["seed"])
     rng_shake, rng_sensor = (np.random.default_rng(s) for s in root.bit_generator.seed_seq.spawn(2))
+    aps = _frame_noise(p, root, height, width, 3)
     path, novel_orbit = build_path(p, spec, rng_shake)
     tl = path.timeline
     n_views, n_bins = p["n_train"], p["n_bins"]
@@ -237,7 +256,8 @@ def generate(
         t_render += time.perf_counter() - t0
         frames = res.rgb
         acc = frames.astype(np.float64).sum(axis=0)  # exact for identical frames (float32 values in float64)
-        blurry[v] = encode(acc / frames.shape[0], p["camera_response"])
+        mean = acc / frames.shape[0]
+        blurry[v] = encode(mean if aps is None else aps(mean), p["camera_response"])
         sharp0[v] = encode(frames[0], p["camera_response"])
         blur_parts.append(blur_extent(depth[0], K, path(et[:1])[0], path(et[np.unique(blur_idx)])))
         hist0 = sim.crossing_hist.copy()
@@ -289,7 +309,9 @@ def generate(
         background=background,
         contrast_threshold=float(p["contrast_threshold"]),
         source=f"eigs synth --scene {name} (seed {p['seed']}"
-        + (f", preset {p['preset']})" if p["preset"] else ")"),
+        + (f", preset {p['preset']}" if p["preset"] else "")
+        + (f", frame noise {p['frame_noise']}" if aps is not None else "")
+        + ")",
         frames=Frames(blurry=blurry, exposure_us=exposures.astype(np.int64)),
         events=events,
         poses=Poses(latent_c2w=latent_c2w, latent_t_us=latent_t.astype(np.int64), source="ground-truth"),

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from eigs.errors import EigsError
+from eigs.synth.frame_noise import FRAME_NOISE_CHOICES
 from eigs.synth.raycast import Box, Cylinder, Lighting, Material, Patchwork, Primitive, Sphere, rotation
 
 # ---------------------------------------------------------------------------------------------------------
@@ -53,6 +54,7 @@ DEFAULTS: dict[str, Any] = {
     "texture_size": 128,
     "camera_response": "linear",  # or "srgb": how linear intensity is encoded in the uint8 frames
     "light_level": 1.0,  # scene illumination multiplier on the linear render (< 1: low light; frames and events)
+    "frame_noise": "none",  # APS noise on the blurry frames (eigs.synth.frame_noise: none | davis346)
     # event sensor
     "contrast_threshold": 0.2,
     "threshold_pos": None,
@@ -136,7 +138,7 @@ _INT_KEYS = {
 }
 _OPTIONAL_FLOAT_KEYS = {"threshold_pos", "threshold_neg"}
 _BOOL_KEYS = {"reset_at_exposure", "leak_random_phase"}
-_STR_KEYS = {"camera_response": ("linear", "srgb")}
+_STR_KEYS = {"camera_response": ("linear", "srgb"), "frame_noise": FRAME_NOISE_CHOICES}
 _OPTIONAL_STR_KEYS = {"preset": tuple(PRESETS)}
 
 

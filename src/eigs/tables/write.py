@@ -108,7 +108,9 @@ NOTE = (
     "Each cell: ours (the paper's value); **best**, <u>second best</u> among the methods (the oracle row, trained on "
     "the sharp ground truth, is an upper bound and not ranked); Δ oracle PSNR = ours − oracle (dB), the mean over the "
     "scenes both runs have; PSNR / SSIM "
-    "(3dgs lineage) / LPIPS-alex are means over the synthetic scenes at the novel views, BRISQUE over the scenes "
+    "(3dgs lineage) / LPIPS-alex / sharpness (the high-frequency power ratio against the ground truth: 1 as sharp, "
+    "below smoother, above noisier; not ranked) are means over the synthetic scenes at the novel views, BRISQUE over "
+    "the scenes "
     "without ground truth (where there is none, over the simulated recordings with a hidden ground truth, as the "
     "note below says); train time and FPS are means per scene; source: the run folders."
 )
