@@ -21,10 +21,11 @@ REPO = Path(__file__).resolve().parents[1]
 DOC = REPO / "docs" / "own-data.md"
 
 
-def doc_commands() -> list[str]:
-    """The lines of the doc's marked bash block (a here-document stays whole, as bash reads it)."""
+def doc_commands(marker: str = "commands") -> list[str]:
+    """The lines of the doc's bash block marked ``<!-- own-data:MARKER -->`` (a here-document stays whole, as bash
+    reads it)."""
     text = DOC.read_text()
-    block = text.split("<!-- own-data:commands -->", 1)[1].split("<!-- own-data:end -->", 1)[0]
+    block = text.split(f"<!-- own-data:{marker} -->", 1)[1].split("<!-- own-data:end -->", 1)[0]
     body = re.search(r"```bash\n(.*?)```", block, re.S)
     assert body, "docs/own-data.md: no bash block between the own-data markers"
     return body.group(1).rstrip("\n").split("\n")
@@ -68,3 +69,27 @@ def test_own_data_walkthrough_runs_as_written(shared_real, tmp_path):
         os.killpg(view.pid, signal.SIGTERM)
         view.wait(timeout=30)
     assert any("http://" in ln for ln in seen), "".join(seen)
+
+
+def test_own_data_walkthrough_with_events_runs_as_written(shared_real, tmp_path):
+    """The second block: a DAVIS346 AEDAT4 recording (events and APS frames) through ingest and the workflow's EDI."""
+    lines = doc_commands("events")
+    assert lines[0].startswith("DATA=")
+    bin_dir = Path(sys.executable).parent
+    for name in ("workflow", "rules", "config", "src"):
+        (tmp_path / name).symlink_to(REPO / name)
+    (tmp_path / ".venv").mkdir()
+    (tmp_path / ".venv" / "bin").symlink_to(bin_dir)
+    script = "\n".join([f"DATA={shared_real / 'davis346_lab' / 'davis.aedat4'}", *lines[1:]]) + "\n"
+    env = {**os.environ, "EIGS_PROGRESS": "0"}
+    proc = subprocess.run(["bash", "-euo", "pipefail", "-c", script], cwd=tmp_path, capture_output=True, text=True,
+                          timeout=600, env=env)  # fmt: skip
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    assert "views: 3 blurry frames" in proc.stdout
+    from eigs.artifacts.edi import read_edi
+
+    edi = read_edi(tmp_path / "results" / "davis" / "b4" / "edi.h5")
+    assert edi.latent.shape[:2] == (3, 5) and not edi.sharp.any()  # every view deblurred with its events
+    assert int(edi.event_count.sum()) > 10_000
+    pngs = sorted((tmp_path / "results" / "davis" / "b4" / "latent").glob("*.png"))
+    assert len(pngs) == 15 and all(p.name in proc.stdout for p in pngs)
