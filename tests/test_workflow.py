@@ -114,6 +114,8 @@ def test_schema_cannot_drift_from_the_ingest_formats():
     add_arguments(parser)
     choices = next(a.choices for a in parser._actions if a.dest == "format")
     assert tuple(choices) == FORMATS
+    readme = (REPO / "config" / "README.md").read_text()
+    assert all(f"`{fmt}`" in readme for fmt in FORMATS), "config/README.md: the scenes paragraph lists every format"
 
 
 def test_builtin_and_ingested_scenes_do_not_clash(tmp_path):
