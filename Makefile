@@ -61,7 +61,7 @@ test: venv lint
 
 # The kill sweep (tests/faults/test_kill.py): the kill config's workflow killed with SIGKILL at 21 seeded instants
 # that hit every rule, recovered each time as README.md says, ending with the uninterrupted run's tables. `make test`
-# runs six of those instants.
+# runs four instants.
 kill-sweep: venv
 	EIGS_KILL_INSTANTS=21 $(BIN)/pytest -p no:xdist -s tests/faults/test_kill.py
 

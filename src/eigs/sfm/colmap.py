@@ -24,10 +24,12 @@ log = logging.getLogger(__name__)
 
 EXHAUSTIVE_MAX_IMAGES = 150  # beyond this, sequential + spatial matching
 FEATURE_TARGET_PX = 256  # upsample until the longer side reaches this (integer factor ≤ 4)
-# Threads of COLMAP's mapper, fixed-pose triangulation and bundle adjustment, whatever ``num_threads`` says: Ceres on
-# two threads sums in another order from run to run (blocks, the same database mapped twice at 2 threads: camera
-# poses 1.6e-11 apart, other bytes), and on these frames a second thread did not make mapping faster (13.8–21.1 s
-# at one thread, 16.4–22.8 s at two, shared 2-core machine). docs/sfm.md, "Reproducibility".
+# Threads of COLMAP's mappers (incremental and global), fixed-pose triangulation and bundle adjustment, whatever
+# ``num_threads`` says: Ceres on two threads sums in another order from run to run (blocks, the same database mapped
+# twice at 2 threads: camera poses 1.6e-11 apart, other bytes; GLOMAP on chair's database three times at 2 threads:
+# 2.3e-10 apart, at 1 thread identical), and a second thread did not make mapping faster (incremental: 13.8–21.1 s
+# at one thread, 16.4–22.8 s at two; GLOMAP: 33.6–53.5 s at one, 40.9–71.3 s at two; shared 2-core machine).
+# docs/sfm.md, "Reproducibility".
 MAPPER_THREADS = 1
 
 
@@ -327,14 +329,14 @@ def map_images(
     fixed_intrinsics: bool = True,
     px: float = 1.0,
 ) -> MappingResult:
-    """Incremental (or global) mapping; keeps the model with the most registered images. Incremental mapping
-    runs on :data:`MAPPER_THREADS` threads (reproducible); global mapping on ``opts.num_threads``."""
+    """Incremental (or global) mapping; keeps the model with the most registered images. Both run on
+    :data:`MAPPER_THREADS` threads (reproducible for a given database)."""
     import pycolmap
 
     out_dir.mkdir(parents=True, exist_ok=True)
     if opts.global_mapping:
         g = pycolmap.GlobalPipelineOptions()
-        g.num_threads = opts.num_threads
+        g.num_threads = MAPPER_THREADS
         g.random_seed = opts.seed
         recs = pycolmap.global_mapping(db_path, image_dir, out_dir, options=g)
     else:

@@ -210,7 +210,7 @@ def _features(db: Path, ldir: Path, lat: _Latents, cam, opts: ColmapOptions, tim
     report["feature_scale"] = cm.feature_scale(cam.width, cam.height, opts.feature_scale)
     report["threads"] = {  # docs/sfm.md, "Reproducibility"
         "features_and_matching": opts.num_threads,
-        "mapping_and_bundle_adjustment": opts.num_threads if opts.global_mapping else cm.MAPPER_THREADS,
+        "mapping_and_bundle_adjustment": cm.MAPPER_THREADS,
         "verification_seed": cm.verification_seed(opts),
     }
     return name_to_id, cm.pixel_scale(opts, cam.width, cam.height)
