@@ -151,3 +151,9 @@ def test_bad_values_are_one_line_errors(overrides, message, capsys, tmp_path, mo
     assert not (tmp_path / "x.h5").exists()
     with pytest.raises(EigsError, match="blur_synthesis"):
         resolve_params("toy", ("test", {"blur_synthesis": 3}))
+
+
+def test_the_option_is_listed(capsys):
+    assert main(["synth", "--list"]) == 0
+    out = capsys.readouterr().out
+    assert "blur_synthesis = 'average'" in out and "e2nerf:  E²NeRF's: the mean of 17 renders" in out
