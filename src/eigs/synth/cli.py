@@ -76,6 +76,10 @@ def _list() -> str:
     for name, model in MODELS.items():
         lines.append(f"  {name}:")
         lines += [f"    {k} = {v:.6g}    # {SOURCES[name][k]}" for k, v in asdict(model).items()]
+    lines.append("blur synthesis (\"blur_synthesis\": NAME; default average; docs/synthetic.md, 'Blur synthesis'):")
+    lines.append("  average: the mean of all subframes + 1 sub-frames of the exposure (linear)")
+    lines.append("  e2nerf:  E²NeRF's: the mean of 17 renders at k·T/16, k = 0..16 (linear, clamped), then the "
+                 "scene's camera_response; needs subframes a multiple of 16 (eigs.synth.blur)")
     return "\n".join(lines)
 
 

@@ -5,7 +5,8 @@
 
 The intensity domain is stated once (docs/synthetic.md): textures are linearised on load, the scene is rendered
 in linear intensity in [0, 1], the blurry frame is the mean of the exposure's sharp sub-frames in linear
-intensity (with ``frame_noise: davis346``, a DAVIS346's APS noise added to it: :mod:`eigs.synth.frame_noise`), frames
+intensity (all of them, or E²NeRF's 17 with ``blur_synthesis: e2nerf``: :mod:`eigs.synth.blur`; with
+``frame_noise: davis346``, a DAVIS346's APS noise added to it: :mod:`eigs.synth.frame_noise`), frames
 are stored 8-bit (``camera_response`` linear by default, sRGB optional), and events come from ln(Y + 1e-3) with Y the
 BT.601 luma of the linear sub-frames.
 """
@@ -31,6 +32,7 @@ from eigs.scene import (
     SharpImages,
     Trajectory,
 )
+from eigs.synth.blur import exposure_mean
 from eigs.synth.raycast import RayCaster
 from eigs.synth.scenes import SceneSpec, get_spec, resolve_params
 from eigs.synth.simulator import EventChunk, EventSimulator, SensorParams, log_luma
@@ -255,8 +257,7 @@ def generate(
         depth = caster.render(path(et[:1]), K, width, height, supersample=1, want_depth=True).depth
         t_render += time.perf_counter() - t0
         frames = res.rgb
-        acc = frames.astype(np.float64).sum(axis=0)  # exact for identical frames (float32 values in float64)
-        mean = acc / frames.shape[0]
+        mean = exposure_mean(frames, p["blur_synthesis"])  # linear (H, W, 3) float64 (eigs.synth.blur)
         blurry[v] = encode(mean if aps is None else aps(mean), p["camera_response"])
         sharp0[v] = encode(frames[0], p["camera_response"])
         blur_parts.append(blur_extent(depth[0], K, path(et[:1])[0], path(et[np.unique(blur_idx)])))
@@ -311,6 +312,7 @@ def generate(
         source=f"eigs synth --scene {name} (seed {p['seed']}"
         + (f", preset {p['preset']}" if p["preset"] else "")
         + (f", frame noise {p['frame_noise']}" if aps is not None else "")
+        + (f", blur {p['blur_synthesis']}" if p["blur_synthesis"] != "average" else "")
         + ")",
         frames=Frames(blurry=blurry, exposure_us=exposures.astype(np.int64)),
         events=events,

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from eigs.errors import EigsError
+from eigs.synth.blur import BLUR_SYNTHESIS_CHOICES, E2NERF_RENDERS
 from eigs.synth.frame_noise import FRAME_NOISE_CHOICES
 from eigs.synth.raycast import Box, Cylinder, Lighting, Material, Patchwork, Primitive, Sphere, rotation
 
@@ -55,6 +56,7 @@ DEFAULTS: dict[str, Any] = {
     "camera_response": "linear",  # or "srgb": how linear intensity is encoded in the uint8 frames
     "light_level": 1.0,  # scene illumination multiplier on the linear render (< 1: low light; frames and events)
     "frame_noise": "none",  # APS noise on the blurry frames (eigs.synth.frame_noise: none | davis346)
+    "blur_synthesis": "average",  # blurry frame: mean of all sub-frames, or E²NeRF's 17 renders (eigs.synth.blur)
     # event sensor
     "contrast_threshold": 0.2,
     "threshold_pos": None,
@@ -138,7 +140,8 @@ _INT_KEYS = {
 }
 _OPTIONAL_FLOAT_KEYS = {"threshold_pos", "threshold_neg"}
 _BOOL_KEYS = {"reset_at_exposure", "leak_random_phase"}
-_STR_KEYS = {"camera_response": ("linear", "srgb"), "frame_noise": FRAME_NOISE_CHOICES}
+_STR_KEYS = {"camera_response": ("linear", "srgb"), "frame_noise": FRAME_NOISE_CHOICES,
+             "blur_synthesis": BLUR_SYNTHESIS_CHOICES}
 _OPTIONAL_STR_KEYS = {"preset": tuple(PRESETS)}
 
 
@@ -424,6 +427,9 @@ def check_params(p: dict[str, Any], where: str = "parameters") -> None:
     need(p["lead_us"] >= 0, f"lead_us must be ≥ 0, got {p['lead_us']}")
     need(p["subframes"] % p["n_bins"] == 0, f"subframes ({p['subframes']}) must be a multiple of n_bins "
          f"({p['n_bins']}) so latent times are sub-frame times")
+    steps = E2NERF_RENDERS - 1
+    need(p["blur_synthesis"] != "e2nerf" or p["subframes"] % steps == 0, f"blur_synthesis e2nerf needs subframes "
+         f"a multiple of {steps} (its {E2NERF_RENDERS} renders are sub-frames), got {p['subframes']}")
     need(p["exposure_us"] % p["subframes"] == 0, f"exposure_us ({p['exposure_us']}) must be a multiple of "
          f"subframes ({p['subframes']}) so sub-frame times are whole µs")
     gap = p["period_us"] - p["exposure_us"]
