@@ -34,12 +34,13 @@ struct BwdCtx {
     const int64_t* slot0;  // (N + 1) first pair slot of each Gaussian
     std::atomic<bool>* mismatch;  // set when a Gaussian is binned to a tile outside its rectangle
     S *pair_grads, *tile_bg;  // tile_bg (n_tiles, D): per tile, sum over its pixels of T_final v_image
+    int64_t n_isects;         // pair slots in pair_grads
 };
 
 // Gaussians ahead (in the back-to-front walk) whose parameters are prefetched: a tile's list is in depth order, so
-// its Gaussians sit at random places in the parameter arrays; the work per Gaussian (hundreds of cycles) hides one
-// Gaussian's worth of cache misses when the loads are issued that far ahead.
-constexpr int64_t kPrefetch = 2;
+// its Gaussians sit at random places in the parameter arrays and the pair-gradient buffer.  The parameters are
+// prefetched kPrefetch Gaussians ahead and the next Gaussian's pair slot (which needs its rectangle) one ahead.
+constexpr int64_t kPrefetch = 4;
 
 template <typename S>
 struct BwdScratch {
@@ -159,6 +160,12 @@ EIGS_INLINE void bwd_tile(const BwdCtx<S>& A, int64_t tile, BwdScratch<S>& ws) {
             __builtin_prefetch(A.colors + h * D);
             __builtin_prefetch(A.rect + 4 * h);
             __builtin_prefetch(A.slot0 + h);
+        }
+        if (k >= 1) {
+            const int64_t h = A.flatten_ids[start + k - 1];
+            const int32_t* rh = A.rect + 4 * h;
+            const int64_t sl = A.slot0[h] + int64_t(ty - rh[2]) * (rh[1] - rh[0] + 1) + (tx - rh[0]);
+            if (sl >= 0 && sl < A.n_isects) __builtin_prefetch(A.pair_grads + sl * P, 1);
         }
         const int64_t g = A.flatten_ids[start + k];
         const int32_t* rc = A.rect + 4 * g;
@@ -319,7 +326,8 @@ void rasterize_backward(int64_t n, const S* means2d, const S* conics, const S* c
     std::atomic<bool> mismatch{false};
     const BwdCtx<S> A{means2d,      conics,      colors, opacities, extents, background, d,
                       width,        height,      tile_offsets, flatten_ids, trans, last, v_image,
-                      v_alpha,      rect.get(),  slot0.get(), &mismatch, pair_grads, tile_bg.data()};
+                      v_alpha,      rect.get(),  slot0.get(), &mismatch, pair_grads, tile_bg.data(),
+                      n_isects};
     const BwdFn<S> fn = pick_bwd(means2d, d, resolve_isa(isa));
     // Costliest tiles first, by the work the forward counted there (a far better estimate than list lengths).
     const std::vector<int64_t> order =
