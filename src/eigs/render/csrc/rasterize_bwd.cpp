@@ -46,13 +46,13 @@ template <typename S>
 struct BwdScratch {
     // Per pixel of the tile: T (the transmittance in front of the Gaussians not yet visited, i.e. behind the
     // current one), sv (below), v_C (d x 256), last index; per row and lane group, the largest last index;
-    // per lane, the colour gradient accumulators of the current Gaussian (d x 16) when d is not a compile-time
-    // constant.
-    std::vector<S> T, sv, G, vcol;
+    // when d is not a compile-time constant, the colour gradient accumulators of the current lane group
+    // (d x LW) and their per-lane totals over the tile row (d x 16).
+    std::vector<S> T, sv, G, vcol, vcol16;
     std::vector<int32_t> last, gmax;
     explicit BwdScratch(int64_t d)
-        : T(kTilePix), sv(kTilePix), G(size_t(d) * kTilePix), vcol(size_t(d) * kTile), last(kTilePix),
-          gmax(kTilePix) {}
+        : T(kTilePix), sv(kTilePix), G(size_t(d) * kTilePix), vcol(size_t(d) * kTile), vcol16(size_t(d) * kTile),
+          last(kTilePix), gmax(kTilePix) {}
 };
 
 template <typename V, typename S>
@@ -67,13 +67,20 @@ EIGS_INLINE void store_v(S* p, V v) {
     __builtin_memcpy(p, &v, sizeof(V));
 }
 
-// Sum of the lanes of v in a fixed pairwise order (deterministic).
-template <typename S, typename V>
-EIGS_INLINE S hsum(V v) {
-    constexpr int n = int(sizeof(V) / sizeof(S));
-    S t[n];
-    __builtin_memcpy(t, &v, sizeof(V));
-    for (int w = n / 2; w >= 1; w /= 2)
+// Sum of the 16 lanes of a tile row held as NG groups of LW = 16 / NG lanes (group g = lanes g LW .. g LW + LW - 1),
+// of which only groups g0..g1 were computed (the others count as zero), in one fixed pairwise order over the 16
+// lanes: lane l + 8 onto lane l, then l + 4, l + 2, l + 1.  The first log2(NG) steps add whole groups, the rest
+// work inside the group, so every group width gives the same sum, bit for bit.
+template <typename S, typename V, int NG>
+EIGS_INLINE S sum_lanes(const V* per_group, int g0, int g1) {
+    constexpr int LW = int(sizeof(V) / sizeof(S));
+    V v[NG];
+    for (int g = 0; g < NG; ++g) v[g] = (g >= g0 && g <= g1) ? per_group[g] : V{};
+    for (int h = NG / 2; h >= 1; h /= 2)
+        for (int g = 0; g < h; ++g) v[g] = v[g] + v[g + h];
+    S t[LW];
+    __builtin_memcpy(t, &v[0], sizeof(V));
+    for (int w = LW / 2; w >= 1; w /= 2)
         for (int l = 0; l < w; ++l) t[l] = t[l] + t[l + w];
     return t[0];
 }
@@ -106,6 +113,7 @@ EIGS_INLINE void bwd_tile(const BwdCtx<S>& A, int64_t tile, BwdScratch<S>& ws) {
     S* __restrict__ SV = ws.sv.data();
     S* __restrict__ G = ws.G.data();
     S* __restrict__ vcol = ws.vcol.data();
+    S* __restrict__ vcol16 = ws.vcol16.data();
     int32_t* __restrict__ last = ws.last.data();
     int32_t* __restrict__ gmax = ws.gmax.data();
 
@@ -191,17 +199,22 @@ EIGS_INLINE void bwd_tile(const BwdCtx<S>& A, int64_t tile, BwdScratch<S>& ws) {
         V colv[DC > 0 ? DC : 1];
         if constexpr (DC > 0)
             for (int ch = 0; ch < DC; ++ch) colv[ch] = V{} + col[ch];
-        else
-            std::fill(vcol, vcol + D * LW, S(0));
-        // accumulators over the Gaussian's pixels, per lane: sum of dx^2 v_sigma, dx v_sigma, dx dy v_sigma,
-        // dy v_sigma, dy^2 v_sigma, v_opacity, v_color (DC > 0)
-        V sxx{}, sx{}, sxy{}, sy{}, syy{}, so{};
-        V sc[DC > 0 ? DC : 1] = {};
-        for (int grp = c0 / LW; grp <= c1 / LW; ++grp) {
+        // Per lane group, per lane: the sums over the Gaussian's rows of dx^2 v_sigma, dx v_sigma, dx dy v_sigma,
+        // dy v_sigma, dy^2 v_sigma, v_opacity and (DC > 0) v_color, kept per group so that the lanes are summed
+        // in one fixed order over the 16 lanes of the tile row (lane_sum), whatever the ISA's group width: the
+        // gradients are bit-identical across the baseline, AVX2 and AVX-512 variants.
+        const int gl0 = c0 / LW, gl1 = c1 / LW;
+        V gq[6 + (DC > 0 ? DC : 0)][NG];
+        for (int grp = gl0; grp <= gl1; ++grp) {
             const V dx = pxv[grp] - mx;
             const V cadxdx = ca * dx * dx;
             const V cbdx = cb * dx;
-            V s0{}, s1{};  // sum over rows of v_sigma and dy v_sigma in this lane group
+            V s0{}, s1{}, s2{}, so{};  // sums over rows of v_sigma, dy v_sigma, dy^2 v_sigma, v_opacity
+            V sc[DC > 0 ? DC : 1];     // and of v_color
+            if constexpr (DC > 0)
+                for (int ch = 0; ch < DC; ++ch) sc[ch] = V{};
+            else
+                std::fill(vcol, vcol + D * LW, S(0));
             for (int r = r0; r <= r1; ++r) {
                 if (kk > gmax[r * NG + grp]) continue;
                 const S dy = (S(tg.y0 + r) + S(0.5)) - my;
@@ -237,20 +250,34 @@ EIGS_INLINE void bwd_tile(const BwdCtx<S>& A, int64_t tile, BwdScratch<S>& ws) {
                 pair_alpha_vjp(raw, f, v_alpha, valid & pair_unclamped(raw), v_sigma, v_o);
                 s0 += v_sigma;
                 s1 += dy * v_sigma;
-                syy += (dy * dy) * v_sigma;
+                s2 += (dy * dy) * v_sigma;
                 so += v_o;
             }
-            sxx += (dx * dx) * s0;
-            sx += dx * s0;
-            sxy += dx * s1;
-            sy += s1;
+            gq[0][grp] = (dx * dx) * s0;
+            gq[1][grp] = dx * s0;
+            gq[2][grp] = dx * s1;
+            gq[3][grp] = s1;
+            gq[4][grp] = s2;
+            gq[5][grp] = so;
+            if constexpr (DC > 0) {
+                for (int ch = 0; ch < DC; ++ch) gq[6 + ch][grp] = sc[ch];
+            } else {
+                for (int64_t ch = 0; ch < D; ++ch)
+                    for (int l = 0; l < LW; ++l) vcol16[ch * kTile + grp * LW + l] = vcol[ch * LW + l];
+            }
         }
-        sigma_moments_vjp(ca, cb, cc, hsum<S>(sxx), hsum<S>(sxy), hsum<S>(syy), hsum<S>(sx), hsum<S>(sy), out);
-        out[5] = hsum<S>(so);
+        auto lane_sum = [&](const V* per_group) { return sum_lanes<S, V, NG>(per_group, gl0, gl1); };
+        sigma_moments_vjp(ca, cb, cc, lane_sum(gq[0]), lane_sum(gq[2]), lane_sum(gq[4]), lane_sum(gq[1]),
+                          lane_sum(gq[3]), out);
+        out[5] = lane_sum(gq[5]);
         if constexpr (DC > 0) {
-            for (int ch = 0; ch < DC; ++ch) out[6 + ch] = hsum<S>(sc[ch]);
+            for (int ch = 0; ch < DC; ++ch) out[6 + ch] = lane_sum(gq[6 + ch]);
         } else {
-            for (int64_t ch = 0; ch < D; ++ch) out[6 + ch] = hsum<S>(load_v<V>(vcol + ch * LW));
+            for (int64_t ch = 0; ch < D; ++ch) {
+                V pg[NG];
+                for (int grp = gl0; grp <= gl1; ++grp) pg[grp] = load_v<V>(vcol16 + ch * kTile + grp * LW);
+                out[6 + ch] = lane_sum(pg);
+            }
         }
     }
 }
