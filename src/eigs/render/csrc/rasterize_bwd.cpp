@@ -37,11 +37,6 @@ struct BwdCtx {
     int64_t n_isects;         // pair slots in pair_grads
 };
 
-// Gaussians ahead (in the back-to-front walk) whose parameters are prefetched: a tile's list is in depth order, so
-// its Gaussians sit at random places in the parameter arrays and the pair-gradient buffer.  The parameters are
-// prefetched kPrefetch Gaussians ahead and the next Gaussian's pair slot (which needs its rectangle) one ahead.
-constexpr int64_t kPrefetch = 4;
-
 template <typename S>
 struct BwdScratch {
     // Per pixel of the tile: T (the transmittance in front of the Gaussians not yet visited, i.e. behind the
@@ -159,6 +154,8 @@ EIGS_INLINE void bwd_tile(const BwdCtx<S>& A, int64_t tile, BwdScratch<S>& ws) {
     const int32_t tx = int32_t(tg.x0 / kTile), ty = int32_t(tg.y0 / kTile);
 
     for (int64_t k = count - 1; k >= 0; --k) {
+        // prefetch (raster_common.h): the parameters kPrefetch Gaussians ahead, the next Gaussian's pair slot (which
+        // needs its rectangle) for writing
         if (k >= kPrefetch) {
             const int64_t h = A.flatten_ids[start + k - kPrefetch];
             __builtin_prefetch(A.means2d + 2 * h);
