@@ -70,6 +70,28 @@ def test_every_isa_gives_identical_gradients(d: int) -> None:
             assert torch.equal(x, y), name
 
 
+def test_non_finite_cotangent_reaches_only_the_gaussians_at_its_pixel() -> None:
+    # a NaN in v_image at one pixel may spoil the gradients of the Gaussians composited there, never those of
+    # Gaussians that merely share its tile row (the kernel evaluates whole lane groups and masks the rest)
+    scene = random_scene(300, 40, 34, seed=14)
+    p = (17, 21)
+
+    def per_gaussian_grads(v_image: torch.Tensor) -> torch.Tensor:
+        s = scene.to(torch.float32, grad=True)
+        image, _, _ = rasterize(*s.args())
+        image.backward(v_image)
+        return torch.cat([t.grad.reshape(t.shape[0], -1) for t in s.leaves()[:5]], dim=1)
+
+    one_hot = torch.zeros(34, 40, 3)
+    one_hot[p] = 1.0
+    touched = (per_gaussian_grads(one_hot) != 0).any(dim=1)
+    v = torch.randn(34, 40, 3, generator=torch.Generator().manual_seed(14))
+    v[p] = float("nan")
+    bad = ~torch.isfinite(per_gaussian_grads(v)).all(dim=1)
+    assert touched.any() and bad.any()
+    assert not (bad & ~touched).any(), f"{int((bad & ~touched).sum())} Gaussians not at the pixel got non-finite grads"
+
+
 def test_gradients_through_clamped_alpha_and_saturation() -> None:
     # opacities at 1 make o*G cross the 0.99 cap (no gradient flows there) and stacks terminate early
     base = random_scene(200, 40, 34, seed=8, opacity=(0.9, 1.0), log_scale=(-2.0, -1.0), margin=0.0)

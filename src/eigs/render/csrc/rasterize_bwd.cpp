@@ -236,12 +236,15 @@ EIGS_INLINE void bwd_tile(const BwdCtx<S>& A, int64_t tile, BwdScratch<S>& ws) {
                 const V v_alpha = Tk * (cg - sv);
                 store_v(SV + q, valid ? a * cg + (cst<V>(1) - a) * sv : sv);
                 store_v(T + q, Tk);
-                const V w = valid ? a * Tk : V{};  // the pair's weight in C
+                // v_color += w v_C with w = alpha T the pair's weight in C; selected after the product (as every
+                // masked term here), so that a non-finite v_C reaches only the Gaussians composited at its pixel
+                const V w = a * Tk;
                 if constexpr (DC > 0) {
-                    for (int ch = 0; ch < DC; ++ch) sc[ch] += w * load_v<V>(G + ch * kTilePix + q);
+                    for (int ch = 0; ch < DC; ++ch) sc[ch] += valid ? w * load_v<V>(G + ch * kTilePix + q) : V{};
                 } else {
                     for (int64_t ch = 0; ch < D; ++ch)
-                        store_v(vcol + ch * LW, load_v<V>(vcol + ch * LW) + w * load_v<V>(G + ch * kTilePix + q));
+                        store_v(vcol + ch * LW, load_v<V>(vcol + ch * LW) +
+                                                    (valid ? w * load_v<V>(G + ch * kTilePix + q) : V{}));
                 }
                 V v_sigma, v_o;
                 pair_alpha_vjp(raw, f, v_alpha, valid & pair_unclamped(raw), v_sigma, v_o);
