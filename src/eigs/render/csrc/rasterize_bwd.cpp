@@ -1,10 +1,10 @@
-// Backward compositing: per tile, the tile's Gaussian list back to front, one tile row per vector.
-// Rebuilds the transmittance in front of each Gaussian with T <- T / max(1e-6, 1 - alpha), starting from the
-// forward's final T, and the colour composited behind it with S <- alpha c + (1 - alpha) S.  Per-lane
-// accumulators are reduced once per (tile, Gaussian) into that pair's slot.  The slots are grouped by Gaussian
-// (each Gaussian's tiles in row-major order, which is its isect order), so the final per-Gaussian sums run in
-// parallel over Gaussians, each over a contiguous range in a fixed order: the result does not depend on the
-// thread count or schedule (no atomics).
+// Backward compositing: per tile, the tile's Gaussian list back to front, one lane group of a tile row per vector
+// (bwd_tile).  Rebuilds the transmittance in front of each Gaussian with T <- T / max(1e-6, 1 - alpha), starting
+// from the forward's final T, and one scalar per pixel for everything behind it (colour, background, alpha
+// output).  Per-lane accumulators are reduced once per (tile, Gaussian) into that pair's slot.  The slots are
+// grouped by Gaussian (each Gaussian's tiles in row-major order, which is its isect order), so the final
+// per-Gaussian sums run in parallel over Gaussians, each over a contiguous range in a fixed order: the result does
+// not depend on the thread count or schedule (no atomics), nor on the ISA variant.
 #include <algorithm>
 #include <atomic>
 #include <cstdint>
