@@ -18,13 +18,20 @@ Measured per configuration (minimum over repeats; the machine is a shared VM who
 Usage: ``.venv/bin/python bench/rasterizer.py [--quick] [--out DIR]`` (writes the "rasterizer" section of
 docs/benchmarks.md; ``--quick``: two sizes, short budgets, no report unless ``--out DIR`` is given, which writes
 DIR/rasterizer.md and DIR/rasterizer.json instead).
+
+``--against REV`` measures only the compositing kernels, of this tree's build and of the C++ sources at git
+revision REV (built into their own extension module, with the same flags), alternating the two builds round by
+round on the same scenes, 1 thread, CPU time; it writes the "rasterizer-ab" section (before/after ns per
+pair-lane, each build's backward/forward ratio, and the relative L2 difference of the two builds' gradients).
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import math
 import statistics
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -132,10 +139,16 @@ class ThreadScaling:
         return sum(self.best[1]) / sum(self.best[2])
 
 
-def time_kernels(args: tuple, repeats: int, isa: int = 0) -> tuple[float, float, int, float, float]:
+def time_kernels(
+    args: tuple, repeats: int, isa: int = 0, module=None, grads: list | None = None
+) -> tuple[float, float, int, float, float]:
     """Compositing kernels alone: minimum wall time (s) of forward and backward, n_isects, and minimum process
-    CPU time (s) of forward and backward (robust to other processes competing for the cores)."""
-    C = _backend.load()
+    CPU time (s) of forward and backward (robust to other processes competing for the cores).
+
+    ``module``: the extension to time (default: this tree's build). ``grads``: when given, the last backward's
+    outputs are appended to it.
+    """
+    C = _backend.load() if module is None else module
     with torch.no_grad():
         _, _, info = rasterize_cpu(*args, isa=isa)
     means, quats, scales, opac, colors, viewmat, K, W, H, bg = args
@@ -148,12 +161,113 @@ def time_kernels(args: tuple, repeats: int, isa: int = 0) -> tuple[float, float,
         t0, c0 = time.perf_counter(), time.process_time()
         image, alpha, trans, last, work = C.rasterize_fwd(m2, con, colors, opac, ext, bg, offs, ids, W, H, isa)
         t1, c1 = time.perf_counter(), time.process_time()
-        C.rasterize_bwd(m2, con, colors, opac, ext, bg, offs, ids, W, H, trans, last, work, v_image, v_alpha, isa)
+        out = C.rasterize_bwd(m2, con, colors, opac, ext, bg, offs, ids, W, H, trans, last, work, v_image, v_alpha, isa)
         t2, c2 = time.perf_counter(), time.process_time()
         if r > 0:
             best_f, best_b = min(best_f, t1 - t0), min(best_b, t2 - t1)
             cpu_f, cpu_b = min(cpu_f, c1 - c0), min(cpu_b, c2 - c1)
+    if grads is not None:
+        grads.append(out)
     return best_f, best_b, int(ids.numel()), cpu_f, cpu_b
+
+
+def load_revision(rev: str):
+    """The extension built from the C++ sources at git revision ``rev`` (same flags as this tree's build), as a
+    module of its own name, so that it loads beside this tree's."""
+    from torch.utils import cpp_extension
+
+    from eigs.util.cache import cache_dir
+
+    root = Path(__file__).resolve().parents[1]
+    rel = _backend.CSRC.relative_to(root)
+    files = {}
+    for name in _backend.SOURCES + _backend.HEADERS:
+        files[name] = subprocess.run(["git", "-C", str(root), "show", f"{rev}:{rel.as_posix()}/{name}"],
+                                     check=True, capture_output=True).stdout  # fmt: skip
+    h = hashlib.sha256(b"".join(files.values()) + " ".join(_backend.CFLAGS + _backend.LDFLAGS).encode())
+    name = f"eigs_render_rev_{h.hexdigest()[:12]}"
+    build = cache_dir() / "torch_extensions" / name
+    csrc = build / "csrc"
+    csrc.mkdir(parents=True, exist_ok=True)
+    for fname, data in files.items():
+        (csrc / fname).write_bytes(data)
+    _backend.ninja_on_path()
+    return cpp_extension.load(name=name, sources=[str(csrc / f) for f in _backend.SOURCES],
+                              extra_cflags=list(_backend.CFLAGS), extra_ldflags=list(_backend.LDFLAGS),
+                              extra_include_paths=[str(csrc)], build_directory=str(build), verbose=False)  # fmt: skip
+
+
+def rel_l2_grads(a: tuple, b: tuple) -> float:
+    """Largest per-tensor relative L2 difference between two rasterize_bwd outputs."""
+    worst = 0.0
+    for x, y in zip(a, b, strict=True):
+        den = float(y.double().norm())
+        worst = max(worst, float((x.double() - y.double()).norm()) / den if den > 0 else float(x.abs().max()))
+    return worst
+
+
+def against(rev: str, quick: bool, out: Path | None) -> None:
+    """The kernels of this tree against those of ``rev``, interleaved (module docstring, ``--against``)."""
+    torch.set_num_threads(1)
+    new = _backend.load()
+    old = load_revision(rev)
+    revname = subprocess.run(["git", "-C", str(Path(__file__).resolve().parents[1]), "rev-parse", "--short", rev],
+                             check=True, capture_output=True, text=True).stdout.strip()  # fmt: skip
+    configs = [(64, 1_000), (64, 4_000), (128, 4_000), (128, 16_000), (256, 16_000), (256, 64_000),
+               (512, 64_000), (512, 200_000)]  # fmt: skip
+    if quick:
+        configs = [(64, 1_000), (256, 16_000)]
+    isas = _backend.available_isas()
+    jobs = [(size, n, "auto") for size, n in configs] + [(256, 16_000 if quick else 64_000, i) for i in isas]
+    rounds = 2 if quick else 7
+    best = {(job, b): [math.inf, math.inf] for job in jobs for b in ("old", "new")}
+    diff = {}
+    scenes = {}
+    for r in range(rounds):
+        for job in jobs:
+            size, n, isa = job
+            args = scenes.setdefault((size, n), make_scene(n, size))
+            grads: list = []
+            # the two builds alternate, and which goes first alternates between rounds
+            for b in ("old", "new") if r % 2 == 0 else ("new", "old"):
+                _, _, n_isects, cf, cb = time_kernels(args, 1, isa=_backend.isa_code(isa),
+                                                      module=old if b == "old" else new, grads=grads)  # fmt: skip
+                best[(job, b)] = [min(best[(job, b)][0], cf), min(best[(job, b)][1], cb)]
+                scenes[("lanes", size, n)] = n_isects * 256
+            diff[job] = rel_l2_grads(*grads)
+        print(f"round {r + 1}/{rounds} done", flush=True)
+    rows, isa_rows = [], []
+    for job in jobs:
+        size, n, isa = job
+        lanes = scenes[("lanes", size, n)]
+        (of, ob), (nf, nb) = best[(job, "old")], best[(job, "new")]
+        row = [of / lanes * 1e9, nf / lanes * 1e9, ob / lanes * 1e9, nb / lanes * 1e9, f"{ob / of:.2f}×",
+               f"{nb / nf:.2f}×", f"{ob / nb:.2f}×", f"{diff[job]:.1e}"]  # fmt: skip
+        if isa == "auto":
+            rows.append([f"{size}²", n, lanes / 1e6, *row])
+        else:
+            isa_rows.append([isa, *row])
+        print(rows[-1] if isa == "auto" else isa_rows[-1], flush=True)
+    head = ["fwd ns before", "fwd ns after", "bwd ns before", "bwd ns after", "bwd/fwd before", "bwd/fwd after",
+            "bwd speed-up", "grad rel. L2"]  # fmt: skip
+    body = f"""
+The compositing kernels of this tree ("after") against those of `{revname}` ("before"), built with the same flags
+into two extension modules and timed in one process on the benchmark scenes (section "Rasterizer"): {rounds} rounds,
+each timing every configuration with both builds back to back (the order alternating between rounds), 1 thread,
+process CPU time, the minimum over the rounds; ns per evaluated pair-lane = CPU time / (n_isects × 256). "grad
+rel. L2": the largest per-tensor relative L2 difference between the two builds' kernel gradients (v_means2d,
+v_conics, v_colors, v_opacities, v_background) on the same cotangents. Kernel ISA: best available ({isas[-1]}).
+
+{table(["image", "N", "M pair-lanes", *head], rows)}
+
+ISA variants at 256² with {16_000 if quick else 64_000} Gaussians (the same rounds):
+
+{table(["ISA", *head], isa_rows)}
+"""
+    data = {"rev": revname, "rounds": rounds,
+            "rows": [dict(zip(["size", "n", "mlanes", *head], r, strict=True)) for r in rows],
+            "isa": [dict(zip(["isa", *head], r, strict=True)) for r in isa_rows]}  # fmt: skip
+    write_section("rasterizer-ab", f"Compositing kernels against {revname}", body, data=data, out=out)
 
 
 ERROR_CONFIGS = [(32, 250), (64, 1_000), (64, 4_000)]  # (image size, N): dense float64 reference affordable
@@ -174,8 +288,13 @@ def reference_error(size: int, n: int) -> tuple[float, float]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="fewer sizes and repeats (smoke run; no report without --out)")
+    ap.add_argument("--against", metavar="REV", default=None,
+                    help="only the compositing kernels, against those of git revision REV, interleaved")  # fmt: skip
     add_out_argument(ap)
     opts = ap.parse_args()
+    if opts.against is not None:
+        against(opts.against, opts.quick, opts.out)
+        return
     _backend.load()
     isas = _backend.available_isas()
     load_start = float(Path("/proc/loadavg").read_text().split()[0])

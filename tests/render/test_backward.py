@@ -49,6 +49,49 @@ def test_gradients_match_reference(n: int, width: int, height: int, d: int, seed
     assert rel_l2(means2d_grad(info)[kept], ref_info["means2d"].grad[kept]) <= 1e-3
 
 
+@pytest.mark.parametrize("d", [3, 1, 2])
+def test_every_isa_gives_identical_gradients(d: int) -> None:
+    # the backward sums each Gaussian's lanes in one fixed order over the 16 lanes of a tile row whatever the
+    # ISA's vector width (4, 8 or 16 floats), so every variant gives the same gradients bit for bit (d = 2: the
+    # kernel without a compile-time channel count)
+    scene = random_scene(400, 50, 41, d=d, seed=13)
+    g = torch.Generator().manual_seed(13)
+    v_image = torch.randn(41, 50, d, generator=g, dtype=torch.float64)
+    v_alpha = torch.randn(41, 50, generator=g, dtype=torch.float64)
+    results = []
+    for isa in ISAS:
+        code = _backend.isa_code(isa)
+        grads, _ = _grads(lambda *a, c=code: rasterize_cpu(*a, isa=c), scene.to(torch.float32, grad=True), v_image,
+                          v_alpha)  # fmt: skip
+        results.append(grads)
+    assert float(results[0][0].abs().max()) > 0
+    for other in results[1:]:
+        for name, x, y in zip(LEAF_NAMES, results[0], other, strict=True):
+            assert torch.equal(x, y), name
+
+
+def test_non_finite_cotangent_reaches_only_the_gaussians_at_its_pixel() -> None:
+    # a NaN in v_image at one pixel may spoil the gradients of the Gaussians composited there, never those of
+    # Gaussians that merely share its tile row (the kernel evaluates whole lane groups and masks the rest)
+    scene = random_scene(300, 40, 34, seed=14)
+    p = (17, 21)
+
+    def per_gaussian_grads(v_image: torch.Tensor) -> torch.Tensor:
+        s = scene.to(torch.float32, grad=True)
+        image, _, _ = rasterize(*s.args())
+        image.backward(v_image)
+        return torch.cat([t.grad.reshape(t.shape[0], -1) for t in s.leaves()[:5]], dim=1)
+
+    one_hot = torch.zeros(34, 40, 3)
+    one_hot[p] = 1.0
+    touched = (per_gaussian_grads(one_hot) != 0).any(dim=1)
+    v = torch.randn(34, 40, 3, generator=torch.Generator().manual_seed(14))
+    v[p] = float("nan")
+    bad = ~torch.isfinite(per_gaussian_grads(v)).all(dim=1)
+    assert touched.any() and bad.any()
+    assert not (bad & ~touched).any(), f"{int((bad & ~touched).sum())} Gaussians not at the pixel got non-finite grads"
+
+
 def test_gradients_through_clamped_alpha_and_saturation() -> None:
     # opacities at 1 make o*G cross the 0.99 cap (no gradient flows there) and stacks terminate early
     base = random_scene(200, 40, 34, seed=8, opacity=(0.9, 1.0), log_scale=(-2.0, -1.0), margin=0.0)

@@ -73,6 +73,12 @@ std::vector<int64_t> tile_schedule(int64_t n_tiles, int nthreads, Cost cost) {
     return order;
 }
 
+// Gaussians ahead in a tile's list whose parameters the kernels prefetch: the list is in depth order, so its
+// Gaussians sit at random places in the parameter arrays (and the backward's pair-gradient buffer), and without
+// the prefetch each Gaussian starts with cache misses (perf: ~15 % of the backward's samples, and the forward
+// is ~1.4x faster with it at 256^2 / 64k).  The work per Gaussian hides several Gaussians' worth of misses.
+constexpr int64_t kPrefetch = 4;
+
 // Work units of one tile as the forward counts them (tile_work): one per Gaussian visited and kRowWork per
 // tile row evaluated for it.  The backward, whose per-row work is ~4x its per-Gaussian setup, schedules by it.
 constexpr int64_t kRowWork = 4;

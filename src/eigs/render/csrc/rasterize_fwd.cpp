@@ -66,6 +66,14 @@ EIGS_INLINE void fwd_tile(const FwdCtx<S>& A, int64_t tile, FwdScratch<S>& ws) {
             }
             if (!any) break;
         }
+        if (k + kPrefetch < count) {  // the tile list is in depth order: its Gaussians are scattered in memory
+            const int64_t h = A.flatten_ids[start + k + kPrefetch];
+            __builtin_prefetch(A.means2d + 2 * h);
+            __builtin_prefetch(A.conics + 3 * h);
+            __builtin_prefetch(A.opacities + h);
+            __builtin_prefetch(A.extents + 2 * h);
+            __builtin_prefetch(A.colors + h * D);
+        }
         const int64_t g = A.flatten_ids[start + k];
         const S mx = A.means2d[2 * g], my = A.means2d[2 * g + 1];
         const S ca = A.conics[3 * g], cb = A.conics[3 * g + 1], cc = A.conics[3 * g + 2];
