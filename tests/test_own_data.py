@@ -31,15 +31,20 @@ def doc_commands(marker: str = "commands") -> list[str]:
     return body.group(1).rstrip("\n").split("\n")
 
 
+def scratch_repository(root: Path) -> None:
+    """``root`` laid out like the repository for the doc's commands: workflow, rules, config and src linked, and
+    ``.venv/bin`` the running interpreter's scripts folder."""
+    for name in ("workflow", "rules", "config", "src"):
+        (root / name).symlink_to(REPO / name)
+    (root / ".venv").mkdir()
+    (root / ".venv" / "bin").symlink_to(Path(sys.executable).parent)
+
+
 @pytest.mark.slow
 def test_own_data_walkthrough_runs_as_written(shared_real, tmp_path):
     lines = doc_commands()
     assert lines[0].startswith("DATA=") and lines[-1].startswith(".venv/bin/eigs view ")
-    bin_dir = Path(sys.executable).parent
-    for name in ("workflow", "rules", "config", "src"):
-        (tmp_path / name).symlink_to(REPO / name)
-    (tmp_path / ".venv").mkdir()
-    (tmp_path / ".venv" / "bin").symlink_to(bin_dir)
+    scratch_repository(tmp_path)
     script = "\n".join([f"DATA={shared_real / 'ecd_slider_depth'}", *lines[1:-1]]) + "\n"
     env = {**os.environ, "EIGS_PROGRESS": "0"}
     proc = subprocess.run(["bash", "-euo", "pipefail", "-c", script], cwd=tmp_path, capture_output=True, text=True,
@@ -75,11 +80,7 @@ def test_own_data_walkthrough_with_events_runs_as_written(shared_real, tmp_path)
     """The second block: a DAVIS346 AEDAT4 recording (events and APS frames) through ingest and the workflow's EDI."""
     lines = doc_commands("events")
     assert lines[0].startswith("DATA=")
-    bin_dir = Path(sys.executable).parent
-    for name in ("workflow", "rules", "config", "src"):
-        (tmp_path / name).symlink_to(REPO / name)
-    (tmp_path / ".venv").mkdir()
-    (tmp_path / ".venv" / "bin").symlink_to(bin_dir)
+    scratch_repository(tmp_path)
     script = "\n".join([f"DATA={shared_real / 'davis346_lab' / 'davis.aedat4'}", *lines[1:]]) + "\n"
     env = {**os.environ, "EIGS_PROGRESS": "0"}
     proc = subprocess.run(["bash", "-euo", "pipefail", "-c", script], cwd=tmp_path, capture_output=True, text=True,

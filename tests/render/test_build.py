@@ -67,3 +67,26 @@ def test_every_csrc_file_is_built_and_hashed() -> None:
     # A header missing from HEADERS would not enter the cache key: editing it would load a stale build.
     on_disk = {p.name for p in _backend.CSRC.iterdir() if p.suffix in (".cpp", ".h")}
     assert on_disk == set(_backend.SOURCES + _backend.HEADERS)
+
+
+def test_a_stale_build_lock_is_removed(tmp_path) -> None:
+    """PyTorch's ``lock`` file left in the build folder by a process killed while loading (SIGKILL: no cleanup) does
+    not make the next load wait for ever: the load removes it and returns."""
+    import subprocess
+    import sys
+
+    build = _backend.cache_dir() / "torch_extensions" / f"eigs_render_{_backend.source_hash()}"
+    _backend.load()  # built and up to date
+    held = subprocess.Popen([sys.executable, "-c", (
+        "import fcntl, pathlib, sys, time\n"
+        f"b = pathlib.Path({str(build)!r})\n"
+        "fh = open(b / '.eigs_load.lock', 'a'); fcntl.flock(fh, fcntl.LOCK_EX)\n"
+        "(b / 'lock').touch()\n"
+        "import os, signal; os.kill(os.getpid(), signal.SIGKILL)\n")])  # fmt: skip
+    assert held.wait(timeout=60) == -9
+    assert (build / "lock").exists()
+    proc = subprocess.run([sys.executable, "-c", "from eigs.render._backend import load; load()"],
+                          capture_output=True, text=True, timeout=300, check=False)  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "left by a process that died" in proc.stderr
+    assert not (build / "lock").exists()

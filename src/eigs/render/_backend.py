@@ -9,9 +9,13 @@ error.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
+import logging
 import re
+import sys
 import threading
+from collections.abc import Iterator
 from pathlib import Path
 from types import ModuleType
 
@@ -29,6 +33,7 @@ LDFLAGS = ("-fopenmp",)
 
 ISA_CODES = {"auto": 0, "baseline": 1, "avx2": 2, "avx512": 3}
 
+log = logging.getLogger(__name__)
 _lock = threading.Lock()
 _module: ModuleType | None = None
 
@@ -60,17 +65,19 @@ def _compiler_error(text: str) -> str:
 
 
 def ninja_on_path() -> None:
-    """Put the interpreter's own scripts folder on PATH when no ``ninja`` is found there: PyTorch's extension loader
-    looks for the ``ninja`` executable on PATH only, and the PyPI package ``ninja`` (a dependency) installs it beside
-    the interpreter, which is not on PATH when ``.venv/bin/eigs`` or ``.venv/bin/pytest`` runs unactivated."""
+    """Put the interpreter's own scripts folder first on PATH when it holds ``ninja``: PyTorch's extension loader runs
+    the first ``ninja`` on PATH, and the pinned PyPI package ``ninja`` (a dependency) installs it beside the
+    interpreter, which is not on PATH when ``.venv/bin/eigs`` or ``.venv/bin/pytest`` runs unactivated. Always that
+    one, not a system ninja found first: two ninja versions hash the build commands differently (Debian's 1.11.1 and
+    the pinned 1.13.2), so processes alternating between them rebuilt the extension on every switch (measured in a
+    CI run: six full rebuilds of 1.5–2 minutes each, tests and Snakemake jobs taking turns)."""
     import os
     import shutil
-    import sys
 
-    if shutil.which("ninja") is None:
-        scripts = os.path.dirname(sys.executable)
-        if os.path.isfile(os.path.join(scripts, "ninja")):
-            os.environ["PATH"] = scripts + os.pathsep + os.environ.get("PATH", "")
+    scripts = os.path.dirname(sys.executable)
+    own = os.path.join(scripts, "ninja")
+    if os.path.isfile(own) and shutil.which("ninja") != own:
+        os.environ["PATH"] = scripts + os.pathsep + os.environ.get("PATH", "")
 
 
 def load() -> ModuleType:
@@ -91,18 +98,40 @@ def load() -> ModuleType:
         except OSError as exc:
             raise EigsError(build, f"cannot create the extension build directory: {exc}") from exc
         try:
-            _module = cpp_extension.load(
-                name=name,
-                sources=[str(CSRC / s) for s in SOURCES],
-                extra_cflags=list(CFLAGS),
-                extra_ldflags=list(LDFLAGS),
-                extra_include_paths=[str(CSRC)],
-                build_directory=str(build),
-                verbose=False,
-            )
+            with _build_lock(build):
+                _module = cpp_extension.load(
+                    name=name,
+                    sources=[str(CSRC / s) for s in SOURCES],
+                    extra_cflags=list(CFLAGS),
+                    extra_ldflags=list(LDFLAGS),
+                    extra_include_paths=[str(CSRC)],
+                    build_directory=str(build),
+                    verbose=False,
+                )
         except (RuntimeError, OSError, ImportError) as exc:
             raise EigsError(CSRC, f"building the C++ rasterizer failed: {_compiler_error(str(exc))}") from exc
         return _module
+
+
+@contextlib.contextmanager
+def _build_lock(build: Path) -> Iterator[None]:
+    """Hold an OS lock on ``build`` (released by the kernel when its holder dies) around PyTorch's load, and remove
+    PyTorch's own ``lock`` file left there. PyTorch marks a build in progress with that file (every load takes it,
+    also to find the build up to date) and waits without end while it exists; a process killed inside a load leaves
+    it behind, and every later job hung (the workflow killed with SIGKILL: tests/faults). Every load of this build
+    goes through this lock, so while we hold it no live process holds PyTorch's: the file is stale."""
+    import fcntl
+
+    with open(build / ".eigs_load.lock", "a") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            stale = build / "lock"
+            if stale.exists():
+                log.warning("removing %s, left by a process that died while loading the rasterizer", stale)
+                stale.unlink(missing_ok=True)
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
 
 
 def isa_code(isa: str) -> int:
