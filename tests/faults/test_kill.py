@@ -8,8 +8,8 @@ reader of its type (:func:`tests.faults.harness.check_results`); at the end no t
 evaluations equal the uninterrupted run's, all but the wall-time columns (those differ between two uninterrupted runs).
 
 CI runs four instants (EDI, training, evaluation, tables) from the uninterrupted run's folder with its scene file made
-newer (everything from EDI on reruns), that run itself starting from the shared toy fixture's upstream; the full sweep, ``make kill-sweep`` (EIGS_KILL_INSTANTS=21), starts from an empty folder and hits every
-rule at least once.
+newer (everything from EDI on reruns), that run itself starting from the shared toy fixture's upstream; the full
+sweep, ``make kill-sweep`` (EIGS_KILL_INSTANTS=21), starts from an empty folder and hits every rule at least once.
 """
 
 from __future__ import annotations
