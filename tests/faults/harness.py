@@ -27,12 +27,12 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from eigs.util.atomic import ANY_TEMPORARY
+
 REPO = Path(__file__).resolve().parents[2]
 SNAKEFILE = REPO / "workflow" / "Snakefile"
 JOB_START = re.compile(r"^(?:local)?rule (\w+):\s*$")
 JOB_END = re.compile(r"Finished jobid: \d+ \(Rule: (\w+)\)")
-# atomic_path's temporaries: .NAME.XXXXXXXX.tmp (directories) and .STEM.XXXXXXXX.tmp.SUFFIX (files)
-TEMP_NAME = re.compile(r"^\..+\.[a-z0-9_]{8}\.tmp(\.[A-Za-z0-9]+)?$")
 # columns measured in wall time: they differ between two uninterrupted runs as well
 TIMING_COLUMNS = re.compile(r"^(time_s|fps|train_seconds|render_ms)(_|$)")
 
@@ -176,7 +176,7 @@ def _covered(rel: Path, incomplete: set[Path]) -> bool:
 
 def is_temporary(path: Path) -> bool:
     """A temporary of :func:`eigs.util.atomic.atomic_path` (or a file inside one): never read by a job."""
-    return any(TEMP_NAME.match(part) for part in path.parts)
+    return any(ANY_TEMPORARY.fullmatch(part) for part in path.parts)
 
 
 def check_file(path: Path) -> str | None:
@@ -245,7 +245,7 @@ def check_results(workdir: Path) -> tuple[list[str], list[Path]]:
     for path in sorted((workdir / "results").rglob("*")):
         rel = path.relative_to(workdir)
         if is_temporary(rel):
-            if TEMP_NAME.match(path.name):
+            if ANY_TEMPORARY.fullmatch(path.name):
                 temps.append(rel)
             continue
         if path.is_dir() or _covered(rel, incomplete):

@@ -14,6 +14,8 @@ from pathlib import Path
 from eigs.errors import EigsError
 
 _RANDOM = r"[a-z0-9_]{8}"  # tempfile's random part of a name
+# any target's temporary (the names :func:`temporary_pattern` matches for one target)
+ANY_TEMPORARY = re.compile(rf"\..+\.{_RANDOM}\.tmp(\.[A-Za-z0-9]+)?")
 FULL_BELOW = 1 << 20  # bytes: a filesystem with less free space than this counts as full
 # How the writers report a full disk when they keep no errno: h5py's HDF5 error stack, pycolmap's SQLite, torch.save
 _FULL_TEXT = ("no space left on device", "errno = 28", "database or disk is full", "file write failed")
@@ -91,8 +93,9 @@ def disk_full_error(path: str | os.PathLike, free: int | None) -> DiskFullError:
 
 
 def temporary_pattern(path: Path, *, directory: bool = False) -> re.Pattern[str]:
-    """The names :func:`atomic_path` gives the temporaries of ``path`` (``.NAME.XXXXXXXX.tmp`` for a directory,
-    ``.STEM.XXXXXXXX.tmp.SUFFIX`` for a file), and no other target's."""
+    """The names :func:`atomic_path` gives the temporaries of ``path`` (a dot, the name, eight random characters and
+    ``.tmp`` for a directory; a dot, the stem, eight random characters, ``.tmp`` and the suffix for a file), and no
+    other target's."""
     if directory:
         return re.compile(rf"\.{re.escape(path.name)}\.{_RANDOM}\.tmp")
     return re.compile(rf"\.{re.escape(path.stem)}\.{_RANDOM}\.tmp{re.escape(path.suffix)}")
