@@ -81,10 +81,28 @@ def test_run_stopped_part_way_through_a_longer_schedule(data, tmp_path):
         _cfg(schedule_steps=-1).validate()
 
 
-def test_checkpoint_of_another_config_is_ignored(data, tmp_path):
+def test_checkpoint_of_another_config_is_ignored(data, tmp_path, caplog):
     train(data, _cfg(method="3dgs", steps=100), tmp_path / "run", stop_after=50)
-    res = train(data, _cfg(method="3dgs", steps=100, seed=1), tmp_path / "run")
-    assert res.rows[0]["step"] == 20  # started from scratch
+    caplog.set_level("INFO")
+    train(data, _cfg(method="3dgs", steps=100, seed=1), tmp_path / "run")
+    assert "written for another configuration" in caplog.text and "resumed from" not in caplog.text
+
+
+def test_checkpoint_of_other_inputs_is_ignored(data, tmp_path, caplog):
+    """A run killed part way, then rerun with the same options on changed input files (a rerun SfM, a new init
+    cloud), starts over; on the same files it resumes."""
+    init = tmp_path / "init.ply"
+    init.write_bytes(b"cloud one")
+    cfg = _cfg(method="3dgs", steps=60)
+    for run in ("same", "changed"):
+        train(data, cfg, tmp_path / run, inputs={"init": str(init)}, stop_after=40)
+    caplog.set_level("INFO")
+    train(data, cfg, tmp_path / "same", inputs={"init": str(init)})
+    assert "resumed from" in caplog.text and "other input files" not in caplog.text
+    caplog.clear()
+    init.write_bytes(b"cloud two")
+    train(data, cfg, tmp_path / "changed", inputs={"init": str(init)})
+    assert "written from other input files" in caplog.text and "resumed from" not in caplog.text
 
 
 def test_non_finite_steps_are_skipped_then_stop(data, tmp_path, monkeypatch):

@@ -36,6 +36,7 @@ from eigs.metrics.pixel import psnr_torch
 from eigs.train.config import TrainConfig
 from eigs.train.data import HeldOut, TrainData
 from eigs.util.atomic import atomic_path
+from eigs.util.digest import files_digest
 from eigs.util.progress import progress
 
 CHECKPOINT_VERSION = 1
@@ -86,6 +87,7 @@ class RunTrainer(ABC):
     the others have defaults)."""
 
     log: logging.Logger  # the subclass module's logger (tests and users filter by it)
+    inputs_digest: str | None = None  # eigs.util.digest.files_digest of the run's input files (set by fit)
     log_columns: tuple[str, ...]  # train_log.csv's fixed columns: step, wall_s, loss, the size, psnr_novel, psnr_blur
 
     def _start(self, data: TrainData, cfg: TrainConfig, device: torch.device) -> None:
@@ -192,6 +194,7 @@ class RunTrainer(ABC):
         return {
             "version": CHECKPOINT_VERSION,
             "config": self.cfg.to_dict(),
+            "inputs_digest": self.inputs_digest,
             "step": self.step,
             **self.model_state(),
             "torch_rng": torch.get_rng_state(),
@@ -219,6 +222,10 @@ class RunTrainer(ABC):
             return False
         if state.get("version") != CHECKPOINT_VERSION or state.get("config") != self.cfg.to_dict():
             log.warning("ignoring checkpoint %s: written for another configuration", path)
+            return False
+        if state.get("inputs_digest") != self.inputs_digest:
+            # the same options on other data (a rerun SfM, a regenerated scene): resuming would mix the two
+            log.warning("ignoring checkpoint %s: written from other input files", path)
             return False
         problem = self.state_problem(state)
         if problem is None:
@@ -274,10 +281,12 @@ def fit(
     tr: RunTrainer, run_dir: str | Path, *, inputs: dict[str, str] | None = None, stop_after: int | None = None
 ) -> RunResult:
     """Train ``tr`` to ``cfg.steps`` (resuming from ``RUN_DIR.partial/checkpoint.pt`` when there is one) and write
-    the run folder. ``stop_after``: leave after this many steps (checkpoint written, no outputs) — for tests of
-    resumption."""
+    the run folder. ``inputs`` (name → path): the run's input files, recorded in ``config.json``; a checkpoint
+    resumes only on byte-identical inputs (their digest is in it). ``stop_after``: leave after this many steps
+    (checkpoint written, no outputs) — for tests of resumption."""
     run_dir = Path(run_dir)
     ckpt = partial_dir_of(run_dir) / "checkpoint.pt"
+    tr.inputs_digest = files_digest(inputs) if inputs else None
     if ckpt.exists():
         tr.load_checkpoint(ckpt)
     tr.log_start()
