@@ -18,8 +18,10 @@ def _python(code: str) -> str:
 
 
 def test_torch_loaded_later_starts_with_the_budget():
-    out = _python("import sys; from eigs.util.threads import set_threads; r = set_threads(1); "
-                  "loaded = 'torch' in sys.modules; import torch; print(r, loaded, torch.get_num_threads())")  # fmt: skip
+    out = _python(
+        "import sys; from eigs.util.threads import set_threads; r = set_threads(1); "
+        "loaded = 'torch' in sys.modules; import torch; print(r, loaded, torch.get_num_threads())"
+    )
     assert out == "1 False 1"
 
 
