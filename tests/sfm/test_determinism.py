@@ -84,23 +84,32 @@ def test_image_ids_follow_the_image_names(toy_twice):
         assert sorted(rec.images) == list(range(1, len(names) + 1))
 
 
-@pytest.mark.slow
-def test_colmap_mode_twice_at_two_threads_agrees(tmp_path):
-    """The default suite's mode (features, exhaustive matching, incremental mapping, test-camera registration) on
-    the ray-cast scene (8 views, B = 2: 24 latent images) at 2 threads. Byte identity is not promised there
-    (docs/sfm.md: COLMAP's approximate CPU matcher changed a few of 7,140 pairs of `blocks` in 3 of 11 passes, poses
-    by up to 8e-5), so the runs must agree to 1e-3 in the normalised frame, register the same latents and record
-    the pinned mapping threads: unseeded verification or multi-threaded mapping differed far more (1,410 of 7,140
-    two-view geometries of `blocks`)."""
-    d = make_scene(tmp_path, views=8, bins=2)
-    outs = []
+@pytest.fixture(scope="module")
+def colmap_twice(tmp_path_factory) -> tuple[dict, list[Path], list[dict]]:
+    """The ray-cast scene (8 views, B = 2: 24 latent images) through COLMAP mode twice at 2 threads: (the scene,
+    the two SfM folders, their reports); the first keeps its work folder (the database)."""
+    root = tmp_path_factory.mktemp("colmap_twice")
+    d = make_scene(root, views=8, bins=2)
+    outs, reports = [], []
     for run in (1, 2):
-        out = tmp_path / f"sfm{run}"
-        cfg = SfmConfig(mode="colmap", plot=False, colmap=ColmapOptions(num_threads=2))
-        report = run_sfm(d["scene"], d["edi"], out, cfg=cfg)
+        out = root / f"sfm{run}"
+        cfg = SfmConfig(mode="colmap", plot=False, keep_work=run == 1, colmap=ColmapOptions(num_threads=2))
+        reports.append(run_sfm(d["scene"], d["edi"], out, cfg=cfg))
+        outs.append(out)
+    return d, outs, reports
+
+
+@pytest.mark.slow
+def test_colmap_mode_twice_at_two_threads_agrees(colmap_twice):
+    """The default suite's mode (features, exhaustive matching, incremental mapping, test-camera registration) on
+    the ray-cast scene at 2 threads. Byte identity is not promised there (docs/sfm.md: COLMAP's approximate CPU
+    matcher changed a few of 7,140 pairs of `blocks` in 3 of 11 passes, poses by up to 8e-5), so the runs must agree
+    to 1e-3 in the normalised frame, register the same latents and record the pinned mapping threads: unseeded
+    verification or multi-threaded mapping differed far more (1,410 of 7,140 two-view geometries of `blocks`)."""
+    _, outs, reports = colmap_twice
+    for report in reports:
         assert report["threads"]["features_and_matching"] == 2
         assert report["threads"]["mapping_and_bundle_adjustment"] == 1
-        outs.append(out)
     p1, p2 = (read_poses(o) for o in outs)
     assert p1.registered.all() and np.array_equal(p1.registered, p2.registered)
     np.testing.assert_allclose(p1.c2w, p2.c2w, atol=1e-3, rtol=0)
@@ -110,25 +119,24 @@ def test_colmap_mode_twice_at_two_threads_agrees(tmp_path):
 
 
 @pytest.mark.slow
-def test_global_mapping_of_one_database_is_identical(tmp_path):
+def test_global_mapping_of_one_database_is_identical(colmap_twice, tmp_path):
     """GLOMAP (``global_mapping: true``, the d346 config's mapper) on one database twice, at ``threads: 2``: the
     mapper runs on the pinned MAPPER_THREADS, so the two models' poses are equal to the bit (at 2 mapper threads they
-    were 1e-10 apart: chair's database, three runs; docs/sfm.md "Reproducibility"). The database is made once: the
-    two-view matcher at 2 threads is not deterministic (docs/sfm.md), which is a separate promise."""
+    were 1e-10 apart: chair's database, three runs; docs/sfm.md "Reproducibility"). The database is the COLMAP-mode
+    run's above (features and matches do not depend on the mapper): the two-view matcher at 2 threads is not
+    deterministic (docs/sfm.md), which is a separate promise."""
     import shutil
 
     from eigs.sfm import colmap as cm
 
-    d = make_scene(tmp_path, views=8, bins=2)
-    cfg = SfmConfig(mode="colmap", plot=False, keep_work=True, colmap=ColmapOptions(num_threads=2, global_mapping=True))
-    report = run_sfm(d["scene"], d["edi"], tmp_path / "sfm", cfg=cfg)
-    assert report["threads"]["mapping_and_bundle_adjustment"] == cm.MAPPER_THREADS == 1
-    work = tmp_path / "sfm" / "work"
+    d, outs, _ = colmap_twice
+    options = ColmapOptions(num_threads=2, global_mapping=True)
+    assert cm.MAPPER_THREADS == 1
     poses = []
     for run in (1, 2):
         db = tmp_path / f"db{run}.db"
-        shutil.copy(work / "database.db", db)
-        result = cm.map_images(db, Path(d["edi"]).parent / "latent", tmp_path / f"map{run}", cfg.colmap)
+        shutil.copy(outs[0] / "work" / "database.db", db)
+        result = cm.map_images(db, Path(d["edi"]).parent / "latent", tmp_path / f"map{run}", options)
         rec = result.reconstruction
         poses.append({im.name: np.asarray(im.cam_from_world().matrix()) for im in rec.images.values() if im.has_pose})
     assert len(poses[0]) >= 20 and poses[0].keys() == poses[1].keys()
