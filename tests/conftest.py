@@ -26,6 +26,30 @@ SHARED = REPO.parent / "shared"
 SHARED_REAL = SHARED / "data" / "real"
 
 
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_protocol(item, nextitem):  # noqa: ANN001, ANN201 (pytest hook)
+    """With ``EIGS_TEST_CPU_LOG=FILE``: one line per test appended to FILE (each xdist worker its own,
+    ``FILE.<pid>``): node id, CPU seconds of the test process, of its finished child processes (Snakemake, its jobs,
+    ``eigs`` subprocesses), and wall seconds, setup and teardown included. CPU time, unlike the wall time of
+    ``--durations``, hardly changes when other work shares the cores (docs/development.md "Test suite time")."""
+    path = os.environ.get("EIGS_TEST_CPU_LOG")
+    if not path:
+        yield
+        return
+    import resource
+    import time
+
+    def cpu(who: int) -> float:
+        r = resource.getrusage(who)
+        return r.ru_utime + r.ru_stime
+
+    own, children, t0 = cpu(resource.RUSAGE_SELF), cpu(resource.RUSAGE_CHILDREN), time.perf_counter()
+    yield
+    own, children = cpu(resource.RUSAGE_SELF) - own, cpu(resource.RUSAGE_CHILDREN) - children
+    with open(f"{path}.{os.getpid()}", "a") as f:
+        f.write(f"{item.nodeid}\t{own:.2f}\t{children:.2f}\t{time.perf_counter() - t0:.2f}\n")
+
+
 def in_ci() -> bool:
     return os.environ.get("CI", "").lower() in ("1", "true", "yes")
 
