@@ -1,7 +1,7 @@
 # Shared helpers: config validation, scene lists, wildcard constraints, stage targets. Run planning (which scenes, SfM
 # rule, runs per scene, B, model file) is eigs.plan's, shared with bench/schedule.py; this file binds it to `config`.
-# Stage options: every default lives in the stage's options dataclass (eigs.events.options.EdiOptions,
-# eigs.sfm.options.SfmConfig / InitOptions, eigs.synth.scenes.DEFAULTS, eigs.train.config.TrainConfig); the schema
+# Stage options: every default lives in the stage's options dataclass (eigs.edi.options.EdiOptions,
+# eigs.sfm.options.SfmConfig, eigs.init.options.InitOptions, eigs.synth.scenes.DEFAULTS, eigs.train.config.TrainConfig); the schema
 # only types and bounds them, and a rule passes its config section unchanged as one JSON object (`--config`).
 import json
 import re
@@ -93,7 +93,7 @@ def sfm_model_path(wildcards):
 
 
 def init_config(wildcards):
-    """The `init:` section for `eigs init --config` (defaults: eigs.sfm.options.InitOptions)."""
+    """The `init:` section for `eigs init --config` (defaults: eigs.init.options.InitOptions)."""
     return section_json("init")
 
 
@@ -109,7 +109,7 @@ def edi_bins():
 
 def edi_config(wildcards):
     """The `edi:` section for `eigs edi --config`, without `bins` (those come from the {bins} wildcard;
-    defaults: eigs.events.options.EdiOptions)."""
+    defaults: eigs.edi.options.EdiOptions)."""
     return section_json("edi", exclude=("bins",))
 
 

@@ -16,12 +16,13 @@ import jsonschema
 import pytest
 import yaml
 
-from eigs.events import cli as edi_cli
-from eigs.events.options import CONFIG_KEYS as EDI_KEYS
-from eigs.events.options import EdiOptions
+from eigs.edi import cli as edi_cli
+from eigs.edi.options import CONFIG_KEYS as EDI_KEYS
+from eigs.edi.options import EdiOptions
+from eigs.init import cli as init_cli
+from eigs.init.options import INIT_CONFIG_KEYS, InitOptions
 from eigs.sfm import cli as sfm_cli
-from eigs.sfm import init_cli
-from eigs.sfm.options import INIT_CONFIG_KEYS, SFM_CONFIG_KEYS, ColmapOptions, InitOptions, SfmConfig, sfm_config
+from eigs.sfm.options import SFM_CONFIG_KEYS, ColmapOptions, SfmConfig, sfm_config
 
 REPO = Path(__file__).resolve().parents[1]
 SCHEMA = yaml.safe_load((REPO / "workflow" / "schemas" / "config.schema.yaml").read_text())

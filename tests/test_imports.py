@@ -6,7 +6,7 @@ import ast
 from pathlib import Path
 
 SRC = Path(__file__).resolve().parents[1] / "src" / "eigs"
-STAGES = {"events", "sfm", "synth", "io"}
+STAGES = {"ingest", "edi", "sfm", "init", "synth"}
 # packages a downstream package may import (besides itself)
 ALLOWED = {
     "artifacts": {"errors", "util"},
@@ -69,7 +69,7 @@ def test_the_package_keeps_the_import_rule():
 def test_the_checker_catches_a_broken_rule(tmp_path):
     root = tmp_path / "eigs"
     for pkg, body in {
-        "sfm": "from eigs.events.edi import x\n",  # a stage reaching into another stage
+        "sfm": "from eigs.edi.pipeline import x\n",  # a stage reaching into another stage
         "train": "from eigs.sfm import run\nimport eigs.artifacts.edi\n",
         "tables": "import torch\nfrom ..artifacts import poses\n",
         "render": "from eigs.train import loop\n",
@@ -80,7 +80,7 @@ def test_the_checker_catches_a_broken_rule(tmp_path):
     got = violations(root)
     assert got == [
         "render/mod.py:1 render reaches down to train",
-        "sfm/mod.py:1 stage sfm imports stage events",
+        "sfm/mod.py:1 stage sfm imports stage edi",
         "tables/mod.py:1 imports torch",
         "train/mod.py:1 train imports sfm",
     ], got

@@ -16,8 +16,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from eigs.events.options import DEFAULT_BINS
-from eigs.io import FORMATS
+from eigs.edi.options import DEFAULT_BINS
+from eigs.ingest import FORMATS
 from eigs.sfm.options import SfmConfig
 from eigs.train import catalog
 
@@ -101,7 +101,7 @@ def scene_has_ground_truth(config: Config, scene: str) -> bool:
 
 
 def edi_bins(config: Config) -> list[int]:
-    """The configured bin counts (`edi: bins:`, default [eigs.events.options.DEFAULT_BINS])."""
+    """The configured bin counts (`edi: bins:`, default [eigs.edi.options.DEFAULT_BINS])."""
     return [int(b) for b in config.get("edi", {}).get("bins", [DEFAULT_BINS])]
 
 

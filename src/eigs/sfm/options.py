@@ -1,6 +1,6 @@
-"""Options of the ``sfm`` and ``init`` stages: :class:`SfmConfig` (with :class:`ColmapOptions`) and
-:class:`InitOptions` hold every default; the config schema, the rules and the CLIs take theirs from here (see
-``eigs.util.options``). No heavy imports: the CLIs read it for their help text."""
+"""Options of the ``sfm`` stage: :class:`SfmConfig` (with :class:`ColmapOptions`) holds every default; the config
+schema, the rules and the CLI take theirs from here (see ``eigs.util.options``). No heavy imports: the CLI reads it
+for its help text."""
 
 from __future__ import annotations
 
@@ -83,17 +83,3 @@ def sfm_config(values: Mapping[str, Any], **run_control: Any) -> SfmConfig:
         col["num_threads"] = run_control.pop("num_threads")
     top = {k: v for k, v in values.items() if k not in _COLMAP_CONFIG}
     return SfmConfig(**top, **run_control, colmap=ColmapOptions(**col))
-
-
-@dataclass
-class InitOptions:
-    """``min_points``: with fewer SfM points, ``random`` random Gaussians are added in the scene bounds;
-    ``sh_degree``: spherical-harmonics degree of the colours; ``seed``: of the random Gaussians."""
-
-    min_points: int = 1000
-    random: int = 10_000
-    sh_degree: int = 3
-    seed: int = 0
-
-
-INIT_CONFIG_KEYS = tuple(f.name for f in fields(InitOptions))
