@@ -20,8 +20,8 @@ from eigs.util.memory import keep_freed_memory
 
 # subcommand name -> module path (in pipeline order). A subcommand is named for what it does and lives in the
 # package of its stage (ingest, edi, sfm, init, train, evaluate, tables are packages of those names); resources ->
-# metrics (the model files the metrics need), render -> train (it renders a run folder); status -> util (it reads
-# the logs every stage writes, beside the progress bars of eigs.util.progress).
+# metrics (the model files the metrics need), render -> evaluate (it renders a run folder, as evaluation does);
+# status -> util (it reads the logs every stage writes, beside the progress bars of eigs.util.progress).
 COMMANDS: dict[str, str] = {
     "scene": "eigs.scene.cli",
     "synth": "eigs.synth.cli",
@@ -30,7 +30,7 @@ COMMANDS: dict[str, str] = {
     "sfm": "eigs.sfm.cli",
     "init": "eigs.init.cli",
     "train": "eigs.train.cli",
-    "render": "eigs.train.render_cli",
+    "render": "eigs.evaluate.render_cli",
     "view": "eigs.view.cli",
     "video": "eigs.view.video_cli",
     "evaluate": "eigs.evaluate.cli",

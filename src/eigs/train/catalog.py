@@ -5,7 +5,7 @@ An entry names the method's family (``gaussian``: a 3DGS model, ``model.ply``; `
 ``model.npz``), the class that trains it (``plugin``, "module:Class", imported only when a run trains), its options
 class and recipe (the defaults that make the method, over the class's), what it reads beyond the blurry frames and
 its default budget. Adding a method is one :class:`MethodSpec` here (or :func:`register` from another module) and
-one class (docs/development.md).
+one class with its options beside it (docs/development.md).
 
 What a method reads is decided by its recipe (default options), not per run:
 
@@ -29,13 +29,28 @@ from typing import Any
 
 from eigs.errors import EigsError
 from eigs.train.config import TrainConfig
-from eigs.train.field_config import DeblurNerfOptions, E2NerfOptions, FieldOptions
-from eigs.train.method_options import MultiRenderOptions, TrajectoryOptions
+from eigs.train.field.options import DeblurNerfOptions, E2NerfOptions, FieldOptions
+from eigs.train.gaussian.options import MultiRenderOptions, TrajectoryOptions
 from eigs.train.options import Options, parse_options
 
 GAUSSIAN = "gaussian"
 FIELD = "field"
-MODEL_FILES = {GAUSSIAN: "model.ply", FIELD: "model.npz"}
+
+
+@dataclass(frozen=True)
+class Family:
+    """A trainer family: the model file of its run folders and its trainer (``"module:Class"`` on the shared loop,
+    :mod:`eigs.train.run`), imported only when a run trains."""
+
+    model_file: str
+    trainer: str
+
+
+FAMILIES = {
+    GAUSSIAN: Family("model.ply", "eigs.train.gaussian.trainer:Trainer"),
+    FIELD: Family("model.npz", "eigs.train.field.trainer:FieldTrainer"),
+}
+MODEL_FILES = {name: f.model_file for name, f in FAMILIES.items()}
 
 
 @dataclass(frozen=True)
@@ -43,8 +58,8 @@ class MethodSpec:
     """One method: its name, family, class, options and what it needs (module docstring)."""
 
     name: str
-    family: str  # GAUSSIAN or FIELD
-    plugin: str  # "module:Class", the class that trains it (eigs.train.methods.Method or field_methods.FieldMethod)
+    family: str  # its trainer family: GAUSSIAN or FIELD (FAMILIES)
+    plugin: str  # "module:Class", the class that trains it (a gaussian.methods.Method or field.methods.FieldMethod)
     options: type[Options]  # its options dataclass
     description: str
     recipe: Mapping[str, Any] = field(default_factory=dict)  # its defaults over the options class's
@@ -57,7 +72,12 @@ class MethodSpec:
     @property
     def model_file(self) -> str:
         """The model file of its run folder: ``model.ply`` (Gaussian) or ``model.npz`` (field)."""
-        return MODEL_FILES[self.family]
+        return FAMILIES[self.family].model_file
+
+    @property
+    def trainer(self) -> str:
+        """Its family's trainer, ``"module:Class"`` (:data:`FAMILIES`)."""
+        return FAMILIES[self.family].trainer
 
     def defaults(self) -> Options:
         """Its options with nothing set by a run: the options class's defaults with the recipe over them."""
@@ -104,14 +124,23 @@ def field_methods() -> frozenset[str]:
     return frozenset(n for n, s in METHODS.items() if s.family == FIELD)
 
 
+def _load(target: str) -> Any:
+    module, _, attr = target.partition(":")
+    return getattr(importlib.import_module(module), attr)
+
+
 def method_class(name: str) -> Any:
     """The class that trains ``name``: imports its plugin module (torch) and returns the class."""
-    module, _, cls = method(name).plugin.partition(":")
-    return getattr(importlib.import_module(module), cls)
+    return _load(method(name).plugin)
+
+
+def trainer_class(name: str) -> Any:
+    """The trainer of ``name``'s family (:data:`FAMILIES`): imports its module (torch) and returns the class."""
+    return _load(method(name).trainer)
 
 
 def _gaussian(name: str, plugin: str, description: str, options: type[Options] = Options, **kw: Any) -> None:
-    register(MethodSpec(name, GAUSSIAN, f"eigs.train.{plugin}", options, description, **kw))
+    register(MethodSpec(name, GAUSSIAN, f"eigs.train.gaussian.{plugin}", options, description, **kw))
 
 
 def _multi(name: str, description: str, **kw: Any) -> None:
@@ -127,7 +156,7 @@ def _field(name: str, cls: str, description: str, options: type[Options] = Field
     # issue's 15 minutes per scene, from the measured per-step cost (docs/results.md, "The NeRF columns"); the fields
     # are still improving at this budget
     kw.setdefault("steps", 800)
-    register(MethodSpec(name, FIELD, f"eigs.train.field_methods:{cls}", options, description, **kw))
+    register(MethodSpec(name, FIELD, f"eigs.train.field.methods:{cls}", options, description, **kw))
 
 
 # In Table I's order (the default rows of eigs.tables.rows follow it)

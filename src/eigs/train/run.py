@@ -1,5 +1,5 @@
-"""The run every trainer shares (Gaussian: :class:`eigs.train.loop.Trainer`, radiance field:
-:class:`eigs.train.field_loop.FieldTrainer`): one step's frame with the non-finite skip, checkpoints and resumption,
+"""The run every trainer shares (Gaussian: :class:`eigs.train.gaussian.trainer.Trainer`, radiance field:
+:class:`eigs.train.field.trainer.FieldTrainer`): one step's frame with the non-finite skip, checkpoints and resumption,
 the step loop with its log and held-out PSNR, the result record and the run folder.
 
 A trainer subclasses :class:`RunTrainer` and supplies the model's parts (its hooks): the loss of one step, the
@@ -48,8 +48,8 @@ class RunResult:
     """A finished (or stopped) run: the model and method as trained, the log rows, the training wall-clock seconds
     and the number of steps skipped for a non-finite loss or gradient."""
 
-    model: Any  # eigs.train.model.GaussianModel or eigs.train.field_model.FieldModel
-    method: Any  # eigs.train.methods.Method or eigs.train.field_methods.FieldMethod
+    model: Any  # eigs.train.gaussian.model.GaussianModel or eigs.train.field.model.FieldModel
+    method: Any  # eigs.train.gaussian.methods.Method or eigs.train.field.methods.FieldMethod
     rows: list[dict[str, Any]]
     train_seconds: float
     skipped_steps: int

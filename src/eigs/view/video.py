@@ -78,7 +78,7 @@ class RunRenderer:
         from eigs.artifacts.poses import read_poses
         from eigs.render.field import FieldTensors
         from eigs.scene import read_scene
-        from eigs.train.model import GaussianModel
+        from eigs.train.gaussian.model import GaussianModel
         from eigs.util.cameras import render_path
 
         if run.scene is None:

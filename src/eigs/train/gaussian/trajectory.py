@@ -8,7 +8,7 @@ the cumulative B-spline; exposure motions are small (a few degrees, a few percen
 to second order in the motion.
 
 The rasterizer has no pose gradients, so a camera at ``P(u)`` is rendered as the camera ``P_ref`` looking at the
-Gaussians moved by ``P_ref · Δ(u)⁻¹ · P_ref⁻¹`` (exact for a rigid motion: :mod:`eigs.train.rigid`).
+Gaussians moved by ``P_ref · Δ(u)⁻¹ · P_ref⁻¹`` (exact for a rigid motion: :mod:`eigs.train.gaussian.rigid`).
 
 Twists are ``ξ = (ω, ν)``: rotation vector (radians) first, then translation (scene units), 6 numbers.
 """
@@ -20,7 +20,7 @@ import math
 import torch
 from torch import Tensor
 
-from eigs.train.method_options import control_problem
+from eigs.train.gaussian.options import control_problem
 
 
 def _skew(w: Tensor) -> Tensor:
@@ -59,7 +59,7 @@ def se3_exp(xi: Tensor) -> Tensor:
 
 def curve_weights(mode: str, n_control: int, u: Tensor) -> Tensor:
     """Weights (U, K) of the K control twists at the times ``u`` (U,) in [0, 1]; each row sums to 1, so a curve
-    whose control twists are all equal is constant. A mode (:data:`eigs.train.method_options.MODES`) or control
+    whose control twists are all equal is constant. A mode (:data:`eigs.train.gaussian.options.MODES`) or control
     count that do not fit raise ValueError."""
     problem = control_problem(mode, n_control)
     if problem:

@@ -24,13 +24,13 @@ from torch import Tensor, nn
 from eigs.errors import EigsError
 from eigs.losses.events import e2nerf_event_loss, from_linear, lin_log, luma, to_linear
 from eigs.render.field import pixel_rays, render_rays
+from eigs.train.catalog import FIELD
 from eigs.train.catalog import method as method_spec
 from eigs.train.config import TrainConfig
 from eigs.train.data import TrainData
-from eigs.train.field_config import DeblurNerfOptions, E2NerfOptions, FieldOptions
-from eigs.train.field_model import FieldModel
-from eigs.train.options import options_json
-from eigs.train.resolve import method_options
+from eigs.train.field.model import FieldModel
+from eigs.train.field.options import DeblurNerfOptions, E2NerfOptions, FieldOptions
+from eigs.train.options import Options, options_json
 
 
 @dataclass
@@ -46,10 +46,11 @@ class FieldMethod(ABC):
     :class:`FieldOptions`, with the method's own fields for ``deblur-nerf`` and ``e2nerf``), checked; ``options``: the
     same as JSON (what ``config.json`` records)."""
 
-    def __init__(self, data: TrainData, cfg: TrainConfig, device: torch.device):
+    family = FIELD
+
+    def __init__(self, data: TrainData, cfg: TrainConfig, opts: Options, device: torch.device):
         self.spec = method_spec(cfg.method)
         self.name, self.description = self.spec.name, self.spec.description
-        opts = method_options(cfg)
         assert isinstance(opts, FieldOptions), f"{self.name}: field options must be FieldOptions"
         self.field_opts: FieldOptions = opts
         self.options = options_json(opts)
@@ -102,8 +103,8 @@ class FieldMethod(ABC):
 class ImageField(FieldMethod):
     """Rays of training images at their cameras, MSE against the pixels."""
 
-    def __init__(self, data: TrainData, cfg: TrainConfig, device: torch.device):
-        super().__init__(data, cfg, device)
+    def __init__(self, data: TrainData, cfg: TrainConfig, opts: Options, device: torch.device):
+        super().__init__(data, cfg, opts, device)
         images, c2w = self.samples()
         if images.shape[0] == 0:
             raise EigsError(data.scene.name, f"method {self.name}: no training sample has a valid pose")
@@ -151,8 +152,8 @@ def latent_poses(data: TrainData) -> Tensor:
 class E2Nerf(FieldMethod):
     """``e2nerf``: each pixel rendered at the N + 1 latent poses of its view, blur MSE + pairwise event loss."""
 
-    def __init__(self, data: TrainData, cfg: TrainConfig, device: torch.device):
-        super().__init__(data, cfg, device)
+    def __init__(self, data: TrainData, cfg: TrainConfig, opts: Options, device: torch.device):
+        super().__init__(data, cfg, opts, device)
         assert isinstance(self.field_opts, E2NerfOptions)
         self.own: E2NerfOptions = self.field_opts
         if self.views.size == 0:
@@ -213,8 +214,8 @@ class KernelNet(nn.Module):
 class DeblurNerf(FieldMethod):
     """``deblur-nerf``: K rays per pixel moved by a per-view MLP (the DSK), their weighted mean against the pixel."""
 
-    def __init__(self, data: TrainData, cfg: TrainConfig, device: torch.device):
-        super().__init__(data, cfg, device)
+    def __init__(self, data: TrainData, cfg: TrainConfig, opts: Options, device: torch.device):
+        super().__init__(data, cfg, opts, device)
         o = self.field_opts
         assert isinstance(o, DeblurNerfOptions)
         self.own: DeblurNerfOptions = o

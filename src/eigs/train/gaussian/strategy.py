@@ -22,7 +22,7 @@ import torch
 from torch import Tensor
 
 from eigs.train.config import TrainConfig
-from eigs.train.model import PARAM_NAMES, GaussianModel
+from eigs.train.gaussian.model import PARAM_NAMES, GaussianModel
 
 log = logging.getLogger(__name__)
 

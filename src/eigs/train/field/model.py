@@ -1,6 +1,6 @@
 """The trainable voxel-grid radiance field: the box from the initial points, the warp (a finer core around the
 object), the grid (one leaf tensor of raw density and colour) and, for ``field: grid+vm``, VM colour factors
-(:mod:`eigs.train.field_factors`), coarse-to-fine growth, the occupancy mask, total variation, export to the model
+(:mod:`eigs.train.field.factors`), coarse-to-fine growth, the occupancy mask, total variation, export to the model
 file.
 
 Shapes: ``grid`` (1, 1 + C, Z, Y, X) (x the last axis); the box [lo, hi] in world units of the canonical SfM frame.
@@ -18,8 +18,7 @@ from torch import Tensor
 from eigs.artifacts.field import FieldArrays
 from eigs.errors import EigsError
 from eigs.render.field import FieldTensors, VMFactors
-from eigs.train.field_config import FieldOptions
-from eigs.train.field_factors import (
+from eigs.train.field.factors import (
     grid_shape,
     grow_vm,
     make_vm,
@@ -29,6 +28,7 @@ from eigs.train.field_factors import (
     vm_from_leaves,
     vm_tv_grad_,
 )
+from eigs.train.field.options import FieldOptions
 
 
 def field_box(

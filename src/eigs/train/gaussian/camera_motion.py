@@ -1,12 +1,12 @@
 """Methods that explain a blurry frame by a learned camera trajectory within its exposure: BAD-Gaussians, BeSplat
 and our reading of EvaGaussians (``docs/methods.md``).
 
-One step on view v: the view's trajectory ``P(u) = P_ref · exp(ξ(u))`` (:mod:`eigs.train.trajectory`) is sampled at
-``n_virtual`` evenly spaced times u_j = j / (n_virtual − 1); each virtual camera is rendered as the reference camera
-looking at the Gaussians moved by ``P_ref · exp(−ξ(u_j)) · P_ref⁻¹`` (exact for a rigid motion, and differentiable
-in ξ, which the rasterizer is not in the camera); the renders are averaged in linear intensity and compared with
-the blurry frame (L1 + D-SSIM). Event losses compare renders at the latent times k / N, which are virtual views
-when ``n_virtual − 1`` is a multiple of N.
+One step on view v: the view's trajectory ``P(u) = P_ref · exp(ξ(u))`` (:mod:`eigs.train.gaussian.trajectory`) is
+sampled at ``n_virtual`` evenly spaced times u_j = j / (n_virtual − 1); each virtual camera is rendered as the reference
+camera looking at the Gaussians moved by ``P_ref · exp(−ξ(u_j)) · P_ref⁻¹`` (exact for a rigid motion, and
+differentiable in ξ, which the rasterizer is not in the camera); the renders are averaged in linear intensity and
+compared with the blurry frame (L1 + D-SSIM). Event losses compare renders at the latent times k / N, which are virtual
+views when ``n_virtual − 1`` is a multiple of N.
 
 Reference and start: ``P_ref`` is the view's latent pose k = 0 (as every method's). With ``init: latent`` the
 control twists start at the least-squares fit to the relative latent poses ``P_0⁻¹ P_k`` from SfM (the paper's
@@ -32,19 +32,20 @@ from eigs.losses.events import (
 from eigs.train.config import TrainConfig
 from eigs.train.data import TrainData
 from eigs.train.event_inputs import EventInputs
-from eigs.train.method_options import TrajectoryOptions
-from eigs.train.methods import LatentMotion, Method, StepOutput
-from eigs.train.model import GaussianModel
-from eigs.train.rigid import transform_gaussians
-from eigs.train.trajectory import curve_weights, fit_controls, se3_exp, se3_log
+from eigs.train.gaussian.methods import LatentMotion, Method, StepOutput
+from eigs.train.gaussian.model import GaussianModel
+from eigs.train.gaussian.options import TrajectoryOptions
+from eigs.train.gaussian.rigid import transform_gaussians
+from eigs.train.gaussian.trajectory import curve_weights, fit_controls, se3_exp, se3_log
+from eigs.train.options import Options
 
 
 class TrajectoryMethod(Method):
     """A per-view camera trajectory, ``n_virtual`` renders per step; the catalog's recipe of each method
     (``bad-gaussians``, ``besplat``, ``evagaussians``) sets its :class:`TrajectoryOptions`."""
 
-    def __init__(self, data: TrainData, cfg: TrainConfig, device: torch.device):
-        super().__init__(data, cfg, device)
+    def __init__(self, data: TrainData, cfg: TrainConfig, opts: Options, device: torch.device):
+        super().__init__(data, cfg, opts, device)
         assert isinstance(self.opts, TrajectoryOptions)
         o: TrajectoryOptions = self.opts
         self.o = o

@@ -1,14 +1,13 @@
 """The Gaussian methods' base class: how one training step explains its target (what it renders, the loss), and the
 methods that render once per step (``3dgs``, ``edi-3dgs``, ``oracle``).
 
-Every method shares the model, optimiser, densification and budget of :mod:`eigs.train.loop`; a method only says
-which samples a step draws from and how it turns renders into a loss. Add a method by subclassing :class:`Method`
+Every method shares the model, optimiser, densification and budget of :mod:`eigs.train.gaussian.trainer`; a method only
+says which samples a step draws from and how it turns renders into a loss. Add a method by subclassing :class:`Method`
 and adding its entry to :mod:`eigs.train.catalog` (docs/development.md).
 """
 
 from __future__ import annotations
 
-import logging
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 
@@ -18,12 +17,12 @@ from torch import Tensor
 
 from eigs.errors import EigsError
 from eigs.losses import photometric_loss
+from eigs.train.catalog import GAUSSIAN
 from eigs.train.catalog import method as method_spec
 from eigs.train.config import TrainConfig
 from eigs.train.data import TrainData
-from eigs.train.model import GaussianModel
-from eigs.train.options import options_json
-from eigs.train.resolve import method_options
+from eigs.train.gaussian.model import GaussianModel
+from eigs.train.options import Options, options_json
 
 
 @dataclass
@@ -51,14 +50,16 @@ class StepOutput:
 
 class Method(ABC):
     """Base class. ``spec``: the method's catalog entry (:mod:`eigs.train.catalog`); ``opts``: its options (the
-    catalog's recipe with ``TrainConfig.method_options`` over it, checked); ``options``: the same as JSON (what
-    ``config.json`` records)."""
+    catalog's recipe with ``TrainConfig.method_options`` over it, checked once where the run is resolved);
+    ``options``: the same as JSON (what ``config.json`` records)."""
 
-    def __init__(self, data: TrainData, cfg: TrainConfig, device: torch.device):
+    family = GAUSSIAN
+
+    def __init__(self, data: TrainData, cfg: TrainConfig, opts: Options, device: torch.device):
         self.spec = method_spec(cfg.method)
         self.name, self.description = self.spec.name, self.spec.description
-        self.opts = method_options(cfg)
-        self.options = options_json(self.opts)
+        self.opts = opts
+        self.options = options_json(opts)
         self.data = data
         self.cfg = cfg
         self.device = device
@@ -97,21 +98,11 @@ class Method(ABC):
         """Restore what :meth:`state_dict` returned (nothing by default)."""
 
 
-def warn_without_events(method: str, reads_events: bool, data: TrainData) -> None:
-    """Log a warning when a method that reads events trains on an EDI artifact without any (a scene without events,
-    or ``eigs edi --no-events``: every latent frame is the blurry frame; the workflow does not schedule such runs)."""
-    if reads_events and not np.asarray(data.edi.event_count).any():
-        logging.getLogger("eigs.train").warning(
-            "method %s reads events, but the EDI artifact of %s has none (every view passed through as sharp): "
-            "it trains on the blurry frames only", method, data.scene.name,
-        )  # fmt: skip
-
-
 class ImageMethod(Method):
     """One render per step at a sample's camera, L1 + D-SSIM against the sample's image."""
 
-    def __init__(self, data: TrainData, cfg: TrainConfig, device: torch.device):
-        super().__init__(data, cfg, device)
+    def __init__(self, data: TrainData, cfg: TrainConfig, opts: Options, device: torch.device):
+        super().__init__(data, cfg, opts, device)
         images, c2w = self.samples()
         if images.shape[0] == 0:
             raise EigsError(data.scene.name, f"method {self.name}: no training sample has a valid pose")

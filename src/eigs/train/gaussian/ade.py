@@ -24,7 +24,7 @@ import math
 import torch
 from torch import Tensor, nn
 
-from eigs.train.method_options import PRECISIONS
+from eigs.train.gaussian.options import PRECISIONS
 
 CHUNK_ROWS = 1024  # Gaussians per block of FusedMLP (1024–2048 measured fastest; 4096 and whole-array slower)
 CHUNK_ROWS_BF16 = 4096  # the same in bfloat16 (AMX, 17k rows, one thread: 1024 43 ms, 2048 35, 4096 33, all 51)

@@ -25,14 +25,15 @@ from eigs.losses.events import (
     luma,
     to_linear,
 )
-from eigs.train.ade import ADE, compute_dtype
 from eigs.train.config import TrainConfig
 from eigs.train.data import TrainData
 from eigs.train.event_inputs import EventInputs
-from eigs.train.method_options import MultiRenderOptions
-from eigs.train.methods import LatentMotion, Method, StepOutput
-from eigs.train.model import GaussianModel
-from eigs.train.rigid import transform_gaussians
+from eigs.train.gaussian.ade import ADE, compute_dtype
+from eigs.train.gaussian.methods import LatentMotion, Method, StepOutput
+from eigs.train.gaussian.model import GaussianModel
+from eigs.train.gaussian.options import MultiRenderOptions
+from eigs.train.gaussian.rigid import transform_gaussians
+from eigs.train.options import Options
 
 
 def rigid_inverse(c2w: Tensor) -> Tensor:
@@ -49,8 +50,8 @@ class MultiRender(Method):
     """N+1 renders per step; the catalog's recipe of each method (``eigs``, ``eigs-b``, ``e2gs``, …) sets its
     :class:`MultiRenderOptions`."""
 
-    def __init__(self, data: TrainData, cfg: TrainConfig, device: torch.device):
-        super().__init__(data, cfg, device)
+    def __init__(self, data: TrainData, cfg: TrainConfig, opts: Options, device: torch.device):
+        super().__init__(data, cfg, opts, device)
         assert isinstance(self.opts, MultiRenderOptions)
         o: MultiRenderOptions = self.opts
         self.o = o

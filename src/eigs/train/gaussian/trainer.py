@@ -20,12 +20,14 @@ import torch
 from eigs.artifacts.gaussians import write_gaussian_ply
 from eigs.artifacts.motion import FILE_NAME as MOTION_FILE
 from eigs.artifacts.motion import RunMotion, sample_indices, write_motion
+from eigs.train.build import build_method
 from eigs.train.config import TrainConfig
 from eigs.train.data import HeldOut, TrainData
-from eigs.train.model import PARAM_NAMES, GaussianModel, make_optimizer, means_lr, scene_extent
-from eigs.train.plugins import make_method
+from eigs.train.gaussian.methods import Method
+from eigs.train.gaussian.model import PARAM_NAMES, GaussianModel, make_optimizer, means_lr, scene_extent
+from eigs.train.gaussian.strategy import DensifyStrategy
+from eigs.train.options import Options
 from eigs.train.run import RunResult, RunTrainer, fit, partial_dir_of, psnr_by_kind
-from eigs.train.strategy import DensifyStrategy
 
 log = logging.getLogger(__name__)
 
@@ -61,12 +63,12 @@ class Trainer(RunTrainer):
     log = log
     log_columns = LOG_COLUMNS
 
-    def __init__(self, data: TrainData, cfg: TrainConfig, device: torch.device):
+    def __init__(self, data: TrainData, cfg: TrainConfig, device: torch.device, options: Options | None = None):
         self._start(data, cfg, device)
         self.model = GaussianModel.from_cloud(data.init, cfg.sh_degree, data.channels, device)
         centres = data.c2w[..., :3, 3].reshape(-1, 3).numpy()
         self.extent = scene_extent(centres)
-        self.method = make_method(data, cfg, device)
+        self.method: Method = build_method(Method, data, cfg, device, options)
         self.optimizer = make_optimizer(self.model, cfg, self.extent)
         for group in self.method.param_groups():
             self.optimizer.add_param_group(group)

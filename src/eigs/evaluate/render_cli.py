@@ -31,9 +31,10 @@ def run(args: argparse.Namespace) -> int:
     from eigs.artifacts.gaussians import read_gaussian_ply
     from eigs.artifacts.poses import read_poses, read_test_cameras
     from eigs.errors import EigsError
+    from eigs.evaluate.renderer import cloud_tensors
     from eigs.render.field import FieldTensors, render_image
+    from eigs.render.gaussians import render_gaussians
     from eigs.scene import read_scene
-    from eigs.train.model import GaussianModel
     from eigs.util.atomic import atomic_path
     from eigs.util.cameras import orbit_cameras
     from eigs.util.image import write_png
@@ -55,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
         field = FieldTensors.from_arrays(read_field(run_dir / FIELD_FILE), device)
         size = {"n_voxels": field.n_voxels}
     else:
-        model = GaussianModel.from_cloud(read_gaussian_ply(run_dir / "model.ply"), sh_degree, scene.channels, device)
+        model = cloud_tensors(read_gaussian_ply(run_dir / "model.ply"), sh_degree, scene.channels, device)
         size = {"n_gaussians": len(model)}
     c = scene.channels
     bg = torch.tensor(np.asarray(scene.background if scene.background is not None else np.zeros(c), np.float32))
@@ -84,7 +85,10 @@ def run(args: argparse.Namespace) -> int:
             if field is not None:
                 img = render_image(field, torch.from_numpy(c2w[i]), k, w, h, bg.to(device))
             else:
-                img, _, _ = model.render(torch.from_numpy(c2w[i]), k, w, h, bg.to(device))
+                img, _, _ = render_gaussians(
+                    model.means, model.quats, model.log_scales, model.opacity_logits, model.sh,
+                    torch.from_numpy(c2w[i]), k, w, h, background=bg.to(device), sh_degree=model.sh_degree,
+                )  # fmt: skip
             times.append(time.perf_counter() - t0)
             write_png(tmp / names[i], img.clamp(0, 1).cpu().numpy())
         fps = len(times) / max(sum(times), 1e-12)

@@ -10,8 +10,8 @@ from dataclasses import dataclass
 
 from eigs.train.options import Options
 
-PRECISIONS = ("auto", "float32", "bfloat16")  # the ADE's matmul dtypes (eigs.train.ade.compute_dtype)
-MODES = ("linear", "cubic", "bezier")  # trajectory curves (eigs.train.trajectory.curve_weights)
+PRECISIONS = ("auto", "float32", "bfloat16")  # the ADE's matmul dtypes (eigs.train.gaussian.ade.compute_dtype)
+MODES = ("linear", "cubic", "bezier")  # trajectory curves (eigs.train.gaussian.trajectory.curve_weights)
 
 
 def control_problem(mode: str, n_control: int) -> str | None:
@@ -29,7 +29,7 @@ def control_problem(mode: str, n_control: int) -> str | None:
 
 @dataclass(frozen=True)
 class MultiRenderOptions(Options):
-    """The N+1-render methods (:mod:`eigs.train.deblur`: EiGS, its ablations, Deblurring-GS(+), E2GS)."""
+    """The N+1-render methods (:mod:`eigs.train.gaussian.deblur`: EiGS, its ablations, Deblurring-GS(+), E2GS)."""
 
     ade: bool = True  # per-Gaussian displacements from the ADE network (False: render the latent poses P_k)
     shape: bool = False  # ADE also predicts rotation and scale changes (Deblurring-GS+)
@@ -87,7 +87,8 @@ class MultiRenderOptions(Options):
 
 @dataclass(frozen=True)
 class TrajectoryOptions(Options):
-    """The camera-trajectory methods (:mod:`eigs.train.camera_motion`: BAD-Gaussians, BeSplat, EvaGaussians)."""
+    """The camera-trajectory methods (:mod:`eigs.train.gaussian.camera_motion`: BAD-Gaussians, BeSplat,
+    EvaGaussians)."""
 
     mode: str = "linear"  # trajectory curve: linear, cubic (B-spline) or bezier
     n_control: int = 2  # control twists of the curve (linear 2, cubic 4, Bézier ≥ 2)

@@ -22,10 +22,12 @@ import torch
 from eigs.artifacts.field import FIELD_FILE, write_field
 from eigs.artifacts.gaussians import sh_dc_to_rgb
 from eigs.render.field import render_image
+from eigs.train.build import build_method
 from eigs.train.config import TrainConfig
 from eigs.train.data import TrainData
-from eigs.train.field_model import FieldModel, field_box, lr_factor, voxel_schedule
-from eigs.train.plugins import make_field_method
+from eigs.train.field.methods import FieldMethod
+from eigs.train.field.model import FieldModel, field_box, lr_factor, voxel_schedule
+from eigs.train.options import Options
 from eigs.train.run import RunResult, RunTrainer, fit, psnr_by_kind
 
 log = logging.getLogger(__name__)
@@ -50,9 +52,9 @@ class FieldTrainer(RunTrainer):
     log = log
     log_columns = FIELD_LOG_COLUMNS
 
-    def __init__(self, data: TrainData, cfg: TrainConfig, device: torch.device):
+    def __init__(self, data: TrainData, cfg: TrainConfig, device: torch.device, options: Options | None = None):
         self._start(data, cfg, device)
-        self.method = make_field_method(data, cfg, device)
+        self.method: FieldMethod = build_method(FieldMethod, data, cfg, device, options)
         self.opts = self.method.field_opts
         lo, hi = field_box(data.init.means, self.opts, cameras=data.c2w[data.valid][:, :3, 3].numpy())
         init = data.init
