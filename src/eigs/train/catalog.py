@@ -40,7 +40,7 @@ FIELD = "field"
 @dataclass(frozen=True)
 class Family:
     """A trainer family: the model file of its run folders and its trainer (``"module:Class"`` on the shared loop,
-    :mod:`eigs.train.run`), imported only when a run trains."""
+    :mod:`eigs.train.loop`), imported only when a run trains."""
 
     model_file: str
     trainer: str

@@ -40,8 +40,8 @@ def run(args: argparse.Namespace) -> int:
     from eigs.train.catalog import FIELD, METHODS, trainer_class
     from eigs.train.config import json_options
     from eigs.train.data import load_train_data
+    from eigs.train.loop import fit
     from eigs.train.resolve import resolve_run
-    from eigs.train.run import fit
 
     if args.list:
         for name, spec in sorted(METHODS.items()):

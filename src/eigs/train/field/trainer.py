@@ -1,5 +1,5 @@
 """The radiance-field methods' trainer (voxel-grid field, ``model.npz``) on the run shared with the Gaussian methods
-(:mod:`eigs.train.run`: steps, non-finite skip, log, checkpoints and resumption, run folder).
+(:mod:`eigs.train.loop`: steps, non-finite skip, log, checkpoints and resumption, run folder).
 
 Run folder: ``model.npz`` (:mod:`eigs.artifacts.field`), ``config.json`` (the same sections as a Gaussian run;
 ``run.model`` = ``"field"``, ``run.n_voxels``), ``train_log.csv`` (``n_voxels`` and ``occupied`` instead of
@@ -27,8 +27,8 @@ from eigs.train.config import TrainConfig
 from eigs.train.data import TrainData
 from eigs.train.field.methods import FieldMethod
 from eigs.train.field.model import FieldModel, field_box, lr_factor, voxel_schedule
+from eigs.train.loop import RunResult, RunTrainer, fit, psnr_by_kind
 from eigs.train.options import Options
-from eigs.train.run import RunResult, RunTrainer, fit, psnr_by_kind
 
 log = logging.getLogger(__name__)
 
@@ -191,7 +191,7 @@ def train_field(
     inputs: dict[str, str] | None = None,
     stop_after: int | None = None,
 ) -> RunResult:
-    """Train the field method ``cfg.method`` on ``data`` and write the run folder (:func:`eigs.train.run.fit`).
+    """Train the field method ``cfg.method`` on ``data`` and write the run folder (:func:`eigs.train.loop.fit`).
     ``stop_after``: leave after this many steps (checkpoint written, no outputs) — for tests of resumption."""
     tr = FieldTrainer(data, cfg, device or torch.device("cpu"))
     return fit(tr, run_dir, inputs=inputs, stop_after=stop_after)

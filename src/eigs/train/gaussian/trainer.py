@@ -1,5 +1,5 @@
 """The Gaussian methods' trainer (3DGS model, ``model.ply``) on the run shared with the radiance-field methods
-(:mod:`eigs.train.run`: steps, non-finite skip, log, checkpoints and resumption, run folder).
+(:mod:`eigs.train.loop`: steps, non-finite skip, log, checkpoints and resumption, run folder).
 
 One step: draw the next training sample (a seeded permutation per epoch), set the means' decayed learning rate,
 the method's loss on that sample, backward, densification statistics, Adam, densify and prune. The run folder holds
@@ -26,8 +26,8 @@ from eigs.train.data import HeldOut, TrainData
 from eigs.train.gaussian.methods import Method
 from eigs.train.gaussian.model import PARAM_NAMES, GaussianModel, make_optimizer, means_lr, scene_extent
 from eigs.train.gaussian.strategy import DensifyStrategy
+from eigs.train.loop import RunResult, RunTrainer, fit, partial_dir_of, psnr_by_kind
 from eigs.train.options import Options
-from eigs.train.run import RunResult, RunTrainer, fit, partial_dir_of, psnr_by_kind
 
 log = logging.getLogger(__name__)
 
@@ -227,7 +227,7 @@ def train(
     inputs: dict[str, str] | None = None,
     stop_after: int | None = None,
 ) -> RunResult:
-    """Train ``cfg.method`` on ``data`` and write the run folder (:func:`eigs.train.run.fit`). ``stop_after``: leave
+    """Train ``cfg.method`` on ``data`` and write the run folder (:func:`eigs.train.loop.fit`). ``stop_after``: leave
     after this many steps (checkpoint written, no outputs) — for tests of resumption."""
     tr = Trainer(data, cfg, device or torch.device("cpu"))
     return fit(tr, run_dir, inputs=inputs, stop_after=stop_after)
