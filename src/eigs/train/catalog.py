@@ -4,8 +4,10 @@ tools read without importing torch (this module imports none).
 An entry names the method's family (``gaussian``: a 3DGS model, ``model.ply``; ``field``: a radiance field,
 ``model.npz``), the class that trains it (``plugin``, "module:Class", imported only when a run trains), its options
 class and recipe (the defaults that make the method, over the class's), what it reads beyond the blurry frames and
-its default budget. Adding a method is one :class:`MethodSpec` here (or :func:`register` from another module) and
-one class with its options beside it (docs/development.md).
+its default budget. Adding a method is one :class:`MethodSpec` here and one class with its options beside it
+(docs/development.md); another installed package adds its methods through the entry-point group
+:data:`ENTRY_POINTS` (``eigs.methods``): each entry point names a :class:`MethodSpec` (or a list of them), loaded when
+this module is first imported, so every process sees it (the CLI, the workflow while it plans, the tables).
 
 What a method reads is decided by its recipe (default options), not per run:
 
@@ -35,6 +37,7 @@ from eigs.train.options import Options, parse_options
 
 GAUSSIAN = "gaussian"
 FIELD = "field"
+ENTRY_POINTS = "eigs.methods"  # the entry-point group of methods from other installed packages
 
 
 @dataclass(frozen=True)
@@ -68,6 +71,7 @@ class MethodSpec:
     needs_trajectory: bool = False
     steps: int = TrainConfig.steps  # default budget when neither the run's options nor --steps set it
     table1: bool = True  # a row of Table I by default (row key = run name = the method's name; eigs.tables.rows)
+    label: str = ""  # its Table I label where the paper has none (eigs.tables.paper); default: its name
 
     @property
     def model_file(self) -> str:
@@ -99,6 +103,31 @@ def register(spec: MethodSpec) -> MethodSpec:
         raise ValueError(f"method {spec.name}: family must be {' or '.join(MODEL_FILES)}, got {spec.family!r}")
     METHODS[spec.name] = spec
     return spec
+
+
+def load_entry_points(group: str | None = None) -> list[str]:
+    """Register the methods that installed packages declare in the entry-point group ``group`` (default
+    :data:`ENTRY_POINTS`): each entry point loads a :class:`MethodSpec` or a list of them. Their options classes are
+    imported here, so they must import no torch; their ``plugin`` classes only when a run trains. Returns the names
+    registered; a broken entry point raises :class:`EigsError` naming it."""
+    from importlib.metadata import entry_points
+
+    names = []
+    for ep in sorted(entry_points(group=group or ENTRY_POINTS), key=lambda e: e.name):
+        where = f"entry point {ep.name} = {ep.value} ({group or ENTRY_POINTS})"
+        try:
+            loaded = ep.load()
+        except Exception as err:  # any error of another package's import: one line naming it
+            raise EigsError(where, f"cannot load it ({type(err).__name__}: {err})") from None
+        for spec in [loaded] if isinstance(loaded, MethodSpec) else list(loaded):
+            if not isinstance(spec, MethodSpec):
+                raise EigsError(where, f"expected a MethodSpec or a list of them, got {type(spec).__name__}")
+            try:
+                register(spec)
+            except ValueError as err:
+                raise EigsError(where, str(err)) from None
+            names.append(spec.name)
+    return names
 
 
 def method(name: str, where: str = "train") -> MethodSpec:
@@ -203,3 +232,5 @@ _gaussian("oracle", "methods:Oracle",
 _multi("eigs-b", "EiGS without the motion-consistency loss (Table II (b))", recipe={"consistency": False},
        needs_events=True, table1=False)  # fmt: skip
 _multi("eigs-minus", "EiGS without the event loss (Table II Ours−)", recipe={"event_loss": "none"}, table1=False)
+# Methods of other installed packages (entry-point group eigs.methods), after the built-in ones
+load_entry_points()
