@@ -121,3 +121,18 @@ def test_rules_pass_the_config_section_unchanged(tmp_path):
     }
     edi = edi_cli.options(_parse(edi_cli, ["s", "-o", "e", "--config", json.dumps(passed["edi"])]))
     assert edi == EdiOptions(mask_top=0.02, per_pixel_threshold=False)
+
+
+def test_schema_enums_are_the_codes():
+    """Every enum of a stage section in the schema is the tuple the code accepts (one list each, in the options
+    module; the schema repeats it for the dry run's first check, and this test fails when the two drift)."""
+    from eigs.edi.options import MODES as EDI_MODES
+    from eigs.edi.options import SCOPES
+    from eigs.sfm.options import DEVICES, MATCHERS
+    from eigs.sfm.options import MODES as SFM_MODES
+
+    code = {("edi", "mode"): EDI_MODES, ("edi", "threshold_scope"): SCOPES, ("sfm", "mode"): SFM_MODES,
+            ("sfm", "matcher"): MATCHERS, ("sfm", "device"): DEVICES}  # fmt: skip
+    schema = {(section, key): tuple(spec["enum"]) for section in STAGES
+              for key, spec in SCHEMA["properties"][section]["properties"].items() if "enum" in spec}  # fmt: skip
+    assert schema == code

@@ -12,6 +12,9 @@ from eigs.errors import EigsError
 
 MODES = ("auto", "colmap", "given", "model")
 MATCHERS = ("auto", "exhaustive", "sequential")
+DEVICES = ("auto", "cpu", "cuda")
+CONFIG = {"config": True}  # field metadata: a key of the config's `sfm:` section (the COLMAP options sit beside the
+# stage's own there); the others are run control or internal
 
 
 @dataclass
@@ -25,15 +28,15 @@ class ColmapOptions:
     ``seed``: of COLMAP's RANSAC and mapper (two-view verification is seeded only when matching runs on several
     threads: ``colmap.verification_seed``). docs/sfm.md, "Reproducibility"."""
 
-    matcher: str = "auto"
-    global_mapping: bool = False
-    refine_intrinsics: bool = False
-    feature_scale: int | None = None
-    max_num_features: int = 8192
+    matcher: str = field(default="auto", metadata=CONFIG)
+    global_mapping: bool = field(default=False, metadata=CONFIG)
+    refine_intrinsics: bool = field(default=False, metadata=CONFIG)
+    feature_scale: int | None = field(default=None, metadata=CONFIG)
+    max_num_features: int = field(default=8192, metadata=CONFIG)
     sequential_overlap: int | None = None  # default: 3 views' worth of latent images
     num_threads: int = 2
-    device: str = "auto"
-    seed: int = 0
+    device: str = field(default="auto", metadata=CONFIG)
+    seed: int = field(default=0, metadata=CONFIG)
     enhance: bool = True  # contrast-stretch dark frames for SIFT
     # Incremental mapper on small (upsampled) frames: reprojection thresholds in original pixels. COLMAP's
     # defaults (4 px; 12 px for absolute pose) suit megapixel images; on 128×96 frames they admitted wrong
@@ -66,8 +69,7 @@ class SfmConfig:
 
 
 _RUN_CONTROL = ("keep_work", "verbose", "plot", "colmap")
-_COLMAP_CONFIG = ("matcher", "global_mapping", "refine_intrinsics", "feature_scale", "max_num_features", "device",
-                  "seed")  # fmt: skip
+_COLMAP_CONFIG = tuple(f.name for f in fields(ColmapOptions) if f.metadata.get("config"))
 # The keys of the `sfm:` config section (flat: the COLMAP options sit beside the stage's own).
 SFM_CONFIG_KEYS = tuple(f.name for f in fields(SfmConfig) if f.name not in _RUN_CONTROL) + _COLMAP_CONFIG
 
