@@ -16,6 +16,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from eigs.artifacts import run as run_folder
 from eigs.edi.options import DEFAULT_BINS
 from eigs.ingest import FORMATS
 from eigs.sfm.options import SfmConfig
@@ -171,18 +172,19 @@ def run_scenes(config: Config, run: str) -> list[str]:
 
 
 def run_model_file(config: Config, run: str) -> str:
-    """The model file of a run folder: model.npz for a radiance-field method (docs/training.md), else model.ply."""
-    return "model.npz" if is_field_method(runs(config)[run]["method"]) else "model.ply"
+    """The model file of a run folder, its method's family's (:attr:`eigs.train.catalog.MethodSpec.model_file`:
+    ``model.npz`` for a radiance-field method, else ``model.ply``; :mod:`eigs.artifacts.run`)."""
+    return catalog.method(runs(config)[run]["method"]).model_file
 
 
 def gaussian_runs(config: Config) -> list[str]:
     """Runs of rule train."""
-    return sorted(r for r in runs(config) if run_model_file(config, r) == "model.ply")
+    return sorted(r for r in runs(config) if run_model_file(config, r) == run_folder.MODEL_PLY)
 
 
 def field_runs(config: Config) -> list[str]:
     """Runs of rule train_field."""
-    return sorted(r for r in runs(config) if run_model_file(config, r) == "model.npz")
+    return sorted(r for r in runs(config) if run_model_file(config, r) == run_folder.MODEL_NPZ)
 
 
 def check(config: Config) -> None:

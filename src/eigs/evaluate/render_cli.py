@@ -27,6 +27,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
     import torch
 
+    from eigs.artifacts import run as run_folder
     from eigs.artifacts.field import FIELD_FILE, read_field
     from eigs.artifacts.gaussians import read_gaussian_ply
     from eigs.artifacts.poses import read_poses, read_test_cameras
@@ -41,11 +42,9 @@ def run(args: argparse.Namespace) -> int:
 
     log = logging.getLogger("eigs.render")
     run_dir = Path(args.run)
-    cfg_path = run_dir / "config.json"
-    if not cfg_path.is_file():
-        raise EigsError(run_dir, "no config.json (not a finished run folder; run `eigs train` first)")
+    cfg_path = run_dir / run_folder.CONFIG
     try:
-        sh_degree = int(json.loads(cfg_path.read_text())["train"]["sh_degree"])
+        sh_degree = int(run_folder.read_config(run_dir)["train"]["sh_degree"])
     except (ValueError, KeyError, TypeError) as err:
         raise EigsError(cfg_path, f"unreadable run config ({err})") from None
     scene = read_scene(args.scene, events=False)
@@ -56,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
         field = FieldTensors.from_arrays(read_field(run_dir / FIELD_FILE), device)
         size = {"n_voxels": field.n_voxels}
     else:
-        model = cloud_tensors(read_gaussian_ply(run_dir / "model.ply"), sh_degree, scene.channels, device)
+        model = cloud_tensors(read_gaussian_ply(run_dir / run_folder.MODEL_PLY), sh_degree, scene.channels, device)
         size = {"n_gaussians": len(model)}
     c = scene.channels
     bg = torch.tensor(np.asarray(scene.background if scene.background is not None else np.zeros(c), np.float32))

@@ -29,6 +29,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from eigs.artifacts.run import MODEL_NPZ, MODEL_PLY
 from eigs.errors import EigsError
 from eigs.train.config import TrainConfig
 from eigs.train.field.options import DeblurNerfOptions, E2NerfOptions, FieldOptions
@@ -50,8 +51,8 @@ class Family:
 
 
 FAMILIES = {
-    GAUSSIAN: Family("model.ply", "eigs.train.gaussian.trainer:Trainer"),
-    FIELD: Family("model.npz", "eigs.train.field.trainer:FieldTrainer"),
+    GAUSSIAN: Family(MODEL_PLY, "eigs.train.gaussian.trainer:Trainer"),
+    FIELD: Family(MODEL_NPZ, "eigs.train.field.trainer:FieldTrainer"),
 }
 MODEL_FILES = {name: f.model_file for name, f in FAMILIES.items()}
 

@@ -31,6 +31,7 @@ import numpy as np
 import torch
 
 from eigs import __version__
+from eigs.artifacts import run as run_folder
 from eigs.errors import EigsError
 from eigs.metrics.pixel import psnr_torch
 from eigs.train.config import TrainConfig
@@ -56,9 +57,8 @@ class RunResult:
 
 
 def partial_dir_of(run_dir: str | Path) -> Path:
-    """The checkpoint folder of ``run_dir``: its sibling ``RUN_DIR.partial``."""
-    run_dir = Path(run_dir)
-    return run_dir.with_name(run_dir.name + ".partial")
+    """The checkpoint folder of ``run_dir`` (:func:`eigs.artifacts.run.partial_dir`)."""
+    return run_folder.partial_dir(run_dir)
 
 
 def finite_grads(params: list[torch.Tensor]) -> bool:
@@ -277,7 +277,7 @@ def fit(
     the run folder. ``stop_after``: leave after this many steps (checkpoint written, no outputs) — for tests of
     resumption."""
     run_dir = Path(run_dir)
-    ckpt = partial_dir_of(run_dir) / "checkpoint.pt"
+    ckpt = partial_dir_of(run_dir) / run_folder.CHECKPOINT
     if ckpt.exists():
         tr.load_checkpoint(ckpt)
     tr.log_start()
@@ -327,5 +327,5 @@ def write_run(tr: RunTrainer, run_dir: Path, inputs: dict[str, str]) -> None:
     doc = {"train": tr.cfg.to_dict(), "inputs": inputs, "run": facts}
     with atomic_path(run_dir, directory=True) as tmp:
         tr.write_model(tmp)
-        (tmp / "config.json").write_text(json.dumps(doc, indent=2, default=float) + "\n")
-        (tmp / "train_log.csv").write_text(log_csv(tr.rows, tr.log_columns))
+        (tmp / run_folder.CONFIG).write_text(json.dumps(doc, indent=2, default=float) + "\n")
+        (tmp / run_folder.LOG).write_text(log_csv(tr.rows, tr.log_columns))

@@ -18,8 +18,8 @@ import numpy as np
 import torch
 
 from eigs.artifacts.gaussians import write_gaussian_ply
-from eigs.artifacts.motion import FILE_NAME as MOTION_FILE
 from eigs.artifacts.motion import RunMotion, sample_indices, write_motion
+from eigs.artifacts.run import MODEL_PLY, MOTION
 from eigs.train.build import build_method
 from eigs.train.config import TrainConfig
 from eigs.train.data import HeldOut, TrainData
@@ -212,10 +212,10 @@ class Trainer(RunTrainer):
         return head, {"n_gaussians": len(self.model)}
 
     def write_model(self, folder: Path) -> None:
-        write_gaussian_ply(self.model.to_cloud(), folder / "model.ply")
+        write_gaussian_ply(self.model.to_cloud(), folder / MODEL_PLY)
         motion = run_motion(self)
         if motion is not None:
-            write_motion(motion, folder / MOTION_FILE)
+            write_motion(motion, folder / MOTION)
 
 
 def train(
