@@ -14,6 +14,8 @@ from eigs.artifacts import run as run_folder
 from eigs.train.resolve import check_runs
 
 
+# the stage sections in Python first (one line naming the key and the accepted keys or values), then the schema
+plan.check_sections(config)
 validate(config, schema="../workflow/schemas/config.schema.yaml")
 # every `runs:` entry as its train job will resolve it (method, training and method options: eigs.train.resolve),
 # so a typo fails the dry run at once, on one line naming the run, the key and the accepted keys

@@ -124,15 +124,14 @@ def test_rules_pass_the_config_section_unchanged(tmp_path):
 
 
 def test_schema_enums_are_the_codes():
-    """Every enum of a stage section in the schema is the tuple the code accepts (one list each, in the options
-    module; the schema repeats it for the dry run's first check, and this test fails when the two drift)."""
-    from eigs.edi.options import MODES as EDI_MODES
-    from eigs.edi.options import SCOPES
-    from eigs.sfm.options import DEVICES, MATCHERS
-    from eigs.sfm.options import MODES as SFM_MODES
+    """Every enum of a stage section in the schema is the tuple the code accepts (``CHOICES`` of the options module,
+    what eigs.plan.check_sections checks; the schema repeats it for `snakemake --lint` and editors, and this test
+    fails when the two drift)."""
+    from eigs.edi.options import CHOICES as EDI_CHOICES
+    from eigs.sfm.options import CHOICES as SFM_CHOICES
 
-    code = {("edi", "mode"): EDI_MODES, ("edi", "threshold_scope"): SCOPES, ("sfm", "mode"): SFM_MODES,
-            ("sfm", "matcher"): MATCHERS, ("sfm", "device"): DEVICES}  # fmt: skip
+    code = {**{("edi", k): tuple(v) for k, v in EDI_CHOICES.items()},
+            **{("sfm", k): tuple(v) for k, v in SFM_CHOICES.items()}}  # fmt: skip
     schema = {(section, key): tuple(spec["enum"]) for section in STAGES
               for key, spec in SCHEMA["properties"][section]["properties"].items() if "enum" in spec}  # fmt: skip
     assert schema == code

@@ -17,10 +17,15 @@ from dataclasses import dataclass
 from typing import Any
 
 from eigs.artifacts import run as run_folder
+from eigs.edi.options import CHOICES as EDI_CHOICES
+from eigs.edi.options import CONFIG_KEYS as EDI_KEYS
 from eigs.edi.options import DEFAULT_BINS
 from eigs.ingest import FORMATS
-from eigs.sfm.options import SfmConfig
+from eigs.init.options import INIT_CONFIG_KEYS
+from eigs.sfm.options import CHOICES as SFM_CHOICES
+from eigs.sfm.options import SFM_CONFIG_KEYS, SfmConfig
 from eigs.train import catalog
+from eigs.util.options import check_section
 
 Config = Mapping[str, Any]
 
@@ -185,6 +190,19 @@ def gaussian_runs(config: Config) -> list[str]:
 def field_runs(config: Config) -> list[str]:
     """Runs of rule train_field."""
     return sorted(r for r in runs(config) if run_model_file(config, r) == run_folder.MODEL_NPZ)
+
+
+def check_sections(config: Config) -> None:
+    """The stage sections (``edi:``, ``sfm:`` globally and per scene, ``init:``) checked against their options
+    dataclasses (:func:`eigs.util.options.check_section`: known keys, the values of the enum keys), before the
+    schema, so that a typo fails the dry run on one line naming the key and the accepted keys or values."""
+    check_section("config: edi", config.get("edi"), EDI_KEYS, EDI_CHOICES)
+    check_section("config: sfm", config.get("sfm"), SFM_CONFIG_KEYS, SFM_CHOICES)
+    check_section("config: init", config.get("init"), INIT_CONFIG_KEYS, {})
+    scenes = config.get("scenes")
+    for scene, spec in (scenes.items() if isinstance(scenes, Mapping) else ()):
+        if isinstance(spec, Mapping):
+            check_section(f"config: scene {scene}: sfm", spec.get("sfm"), SFM_CONFIG_KEYS, SFM_CHOICES)
 
 
 def check(config: Config) -> None:

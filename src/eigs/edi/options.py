@@ -31,3 +31,4 @@ class EdiOptions:
 
 
 CONFIG_KEYS = tuple(f.name for f in fields(EdiOptions) if f.name != "show_progress")
+CHOICES = {"mode": MODES, "threshold_scope": SCOPES}  # the keys of the `edi:` section that take one of a few values

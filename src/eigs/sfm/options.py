@@ -72,6 +72,7 @@ _RUN_CONTROL = ("keep_work", "verbose", "plot", "colmap")
 _COLMAP_CONFIG = tuple(f.name for f in fields(ColmapOptions) if f.metadata.get("config"))
 # The keys of the `sfm:` config section (flat: the COLMAP options sit beside the stage's own).
 SFM_CONFIG_KEYS = tuple(f.name for f in fields(SfmConfig) if f.name not in _RUN_CONTROL) + _COLMAP_CONFIG
+CHOICES = {"mode": MODES, "matcher": MATCHERS, "device": DEVICES}  # the keys of `sfm:` that take one of a few values
 
 
 def sfm_config(values: Mapping[str, Any], **run_control: Any) -> SfmConfig:
