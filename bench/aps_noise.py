@@ -1,7 +1,7 @@
 """APS frame noise of the real DAVIS346 recording beside the davis346 frame-noise model (docs/synthetic.md, "Frame
 noise"): ``.venv/bin/python bench/aps_noise.py [AEDAT4]`` prints JSON (default: ../shared/data/real/davis346_lab).
 
-The recording is read through eigs.io.aedat4 (frames, exposures, events); eigs.synth.frame_noise_stats measures it;
+The recording is read through eigs.ingest.aedat4 (frames, exposures, events); eigs.synth.frame_noise_stats measures it;
 the model's temporal noise is predicted at the recording's mean level (shot + read + 8-bit quantisation)."""
 
 from __future__ import annotations
@@ -17,8 +17,8 @@ DEFAULT = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "real
 
 def read_davis(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Frames ``(V, H, W)`` uint8, exposures ``(V, 2)`` µs and the events' x, y, t of an AEDAT 4 file."""
-    from eigs.io.aedat4 import open_aedat4_source
-    from eigs.io.options import IngestOptions
+    from eigs.ingest.aedat4 import open_aedat4_source
+    from eigs.ingest.options import IngestOptions
 
     src = open_aedat4_source(str(path), IngestOptions())
     assert src.load_frames is not None and src.events is not None and src.exposure_us is not None

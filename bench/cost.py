@@ -45,7 +45,7 @@ from bench.device_batch import merged_config  # noqa: E402
 from bench.train import resized_cloud  # noqa: E402
 from eigs.train.config import TrainConfig  # noqa: E402
 from eigs.train.data import TrainData, load_train_data  # noqa: E402
-from eigs.train.loop import Trainer  # noqa: E402
+from eigs.train.gaussian.trainer import Trainer  # noqa: E402
 from eigs.util.memory import keep_freed_memory  # noqa: E402
 
 

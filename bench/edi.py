@@ -85,9 +85,9 @@ def main() -> None:
     import os
 
     os.environ.setdefault("EIGS_PROGRESS", "0")
-    from eigs.events.binning import bin_events, latent_times
-    from eigs.events.edi import ExposureIntegral, edi_continuous, edi_e2nerf, to_linear
-    from eigs.events.pipeline import EdiOptions, compute_edi
+    from eigs.edi.binning import bin_events, latent_times
+    from eigs.edi.edi import ExposureIntegral, edi_continuous, edi_e2nerf, to_linear
+    from eigs.edi.pipeline import EdiOptions, compute_edi
     from eigs.scene import read_scene
     from eigs.util.threads import set_threads
 

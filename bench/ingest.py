@@ -3,7 +3,7 @@
     .venv/bin/python bench/ingest.py [--events 20000000] [--keep] [--out DIR]
 
 Writes a DSEC-layout HDF5 file (uncompressed and Blosc-zstd) and an ECD text file to a temporary folder in /tmp,
-measures on one pinned core (a) the reader alone (``eigs.io`` chunk iterator: decode, unit conversion, checks) and
+measures on one pinned core (a) the reader alone (``eigs.ingest`` chunk iterator: decode, unit conversion, checks) and
 (b) the whole ``eigs ingest`` into a scene file, with peak memory, then deletes the files and updates the
 ``ingest`` section of docs/benchmarks.md (only for ≥ 20 M events; ``--out DIR``: DIR/ingest.md and
 DIR/ingest.json, at any size).
@@ -79,8 +79,8 @@ def write_txt(path: Path, ev: tuple[np.ndarray, ...], chunk: int = 2_000_000) ->
 
 def time_reader(fmt: str, path: Path, repeats: int = 3) -> tuple[float, int]:
     """Best wall time (s) to iterate the reader's chunks, and the number of events read."""
-    from eigs.io.h5events import read_h5_events
-    from eigs.io.text import read_event_text
+    from eigs.ingest.h5events import read_h5_events
+    from eigs.ingest.text import read_event_text
 
     best, n = float("inf"), 0
     for _ in range(repeats):
@@ -156,7 +156,7 @@ def main() -> None:
     load = os.getloadavg()[0]
     body = (
         f"Generated DSEC-layout HDF5 and ECD text files of {n:,} events ({W}×{H}, ~1 M ev/s), one pinned core. "
-        "*Reader*: the `eigs.io` chunk iterator alone (decode, int64 µs, ±1 polarity, range/order/`ms_to_idx` "
+        "*Reader*: the `eigs.ingest` chunk iterator alone (decode, int64 µs, ±1 polarity, range/order/`ms_to_idx` "
         "checks). *Ingest*: the whole `eigs ingest` (`--keep-events all`, uncompressed scene file, its "
         f"validation) with the child's peak RSS; the scene's event arrays take {out_mb:,.0f} MB. "
         f"Target: ≥ {TARGET_H5 / 1e6:.0f} M ev/s reading h5 on one core. Load average at the end: {load:.1f} "

@@ -28,7 +28,7 @@ from bench._report import add_out_argument, table, write_section  # noqa: E402
 from bench.train import method_breakdown, resized_cloud  # noqa: E402
 from eigs.train.config import TrainConfig  # noqa: E402
 from eigs.train.data import load_train_data  # noqa: E402
-from eigs.train.loop import Trainer  # noqa: E402
+from eigs.train.gaussian.trainer import Trainer  # noqa: E402
 from eigs.util.memory import keep_freed_memory  # noqa: E402
 
 RASTER_NODE = "RasterizeToPixels"  # the rasterizer's autograd Function (src/eigs/render/csrc/autograd.cpp)

@@ -41,14 +41,15 @@ import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench.schedule import LedgerError, jobs_of, merge_configs, read_benchmark  # noqa: E402
+from eigs.artifacts import run as run_folder  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT_LEDGER = REPO / "docs" / "suite"
 JOBS_CSV = "jobs.csv"
 JOBS_COLUMNS = ("job", "benchmark", "wall_s", "cpu_s", "threads", "machine", "commit", "date")
-RUN_FILES = ("config.json", "train_log.csv")  # a run folder's small files (the model is not kept)
+RUN_FILES = (run_folder.CONFIG, run_folder.LOG)  # a run folder's small files (the model is not kept)
 EVAL_FILES = ("metrics.json", "per_image.csv")
-MODEL_FILES = ("model.ply", "model.npz")  # one of them marks a finished run folder
+MODEL_FILES = run_folder.MODEL_FILES  # one of them marks a finished run folder
 MAX_RENDER_KB = 256
 
 

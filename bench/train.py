@@ -32,7 +32,7 @@ from eigs.artifacts.gaussians import GaussianCloud, read_gaussian_ply  # noqa: E
 from eigs.losses import photometric_loss  # noqa: E402
 from eigs.train.config import TrainConfig  # noqa: E402
 from eigs.train.data import load_train_data  # noqa: E402
-from eigs.train.loop import Trainer  # noqa: E402
+from eigs.train.gaussian.trainer import Trainer  # noqa: E402
 from eigs.util.memory import keep_freed_memory  # noqa: E402
 
 

@@ -1,8 +1,8 @@
 # Shared helpers: config validation, scene lists, wildcard constraints, stage targets. Run planning (which scenes, SfM
 # rule, runs per scene, B, model file) is eigs.plan's, shared with bench/schedule.py; this file binds it to `config`.
-# Stage options: every default lives in the stage's options dataclass (eigs.events.options.EdiOptions,
-# eigs.sfm.options.SfmConfig / InitOptions, eigs.synth.scenes.DEFAULTS, eigs.train.config.TrainConfig); the schema
-# only types and bounds them, and a rule passes its config section unchanged as one JSON object (`--config`).
+# Stage options: every default lives in the stage's options dataclass (eigs.edi.options.EdiOptions,
+# eigs.sfm.options.SfmConfig, eigs.init.options.InitOptions, eigs.synth.scenes.DEFAULTS, eigs.train.config.TrainConfig);
+# the schema only types and bounds them, and a rule passes its config section unchanged as one JSON object (`--config`).
 import json
 import re
 import shlex
@@ -10,9 +10,12 @@ import shlex
 from snakemake.utils import validate
 
 from eigs import plan
+from eigs.artifacts import run as run_folder
 from eigs.train.resolve import check_runs
 
 
+# the stage sections in Python first (one line naming the key and the accepted keys or values), then the schema
+plan.check_sections(config)
 validate(config, schema="../workflow/schemas/config.schema.yaml")
 # every `runs:` entry as its train job will resolve it (method, training and method options: eigs.train.resolve),
 # so a typo fails the dry run at once, on one line naming the run, the key and the accepted keys
@@ -93,7 +96,7 @@ def sfm_model_path(wildcards):
 
 
 def init_config(wildcards):
-    """The `init:` section for `eigs init --config` (defaults: eigs.sfm.options.InitOptions)."""
+    """The `init:` section for `eigs init --config` (defaults: eigs.init.options.InitOptions)."""
     return section_json("init")
 
 
@@ -109,7 +112,7 @@ def edi_bins():
 
 def edi_config(wildcards):
     """The `edi:` section for `eigs edi --config`, without `bins` (those come from the {bins} wildcard;
-    defaults: eigs.events.options.EdiOptions)."""
+    defaults: eigs.edi.options.EdiOptions)."""
     return section_json("edi", exclude=("bins",))
 
 
@@ -135,6 +138,14 @@ def run_model_file(run):
 plan.check(config)  # config errors of the scenes' SfM sections and the runs' scene lists now, not when a rule asks
 GAUSSIAN_RUNS = plan.gaussian_runs(config)
 FIELD_RUNS = plan.field_runs(config)
+
+
+RUN_DIR = "results/{scene}/b{bins}/{run}"  # a run folder; its files are named in eigs.artifacts.run
+
+
+def run_path(name):
+    """A file of the run folder (wildcards scene, bins, run) by its name in eigs.artifacts.run."""
+    return f"{RUN_DIR}/{name}"
 
 
 def run_model(wildcards):

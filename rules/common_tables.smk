@@ -54,6 +54,6 @@ def figure_inputs(wildcards):
     for run in sorted(RUNS):
         for scene in run_scenes(run):
             b = run_bins(run)
-            out += [f"results/{scene}/b{b}/{run}/train_log.csv", f"results/{scene}/b{b}/{run}/config.json",
+            out += [f"results/{scene}/b{b}/{run}/{run_folder.LOG}", f"results/{scene}/b{b}/{run}/{run_folder.CONFIG}",
                     f"results/{scene}/scene.h5", f"results/{scene}/b{b}/latent"]  # fmt: skip
     return sorted(set(out))

@@ -19,7 +19,7 @@ def video_inputs(wildcards):
     out = []
     for run in video_scene_runs(wildcards.scene):
         d = f"results/{wildcards.scene}/b{run_bins(run)}"
-        out += [f"{d}/{run}/{run_model_file(run)}", f"{d}/{run}/config.json", f"{d}/sfm"]
+        out += [f"{d}/{run}/{run_model_file(run)}", f"{d}/{run}/{run_folder.CONFIG}", f"{d}/sfm"]
     return sorted(set(out))
 
 

@@ -7,7 +7,7 @@
 rule evaluate:
     input:
         model=run_model,
-        config="results/{scene}/b{bins}/{run}/config.json",
+        config=run_path(run_folder.CONFIG),
         scene="results/{scene}/scene.h5",
         sfm="results/{scene}/b{bins}/sfm",
         lpips="resources/lpips/MANIFEST.json",

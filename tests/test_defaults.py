@@ -16,12 +16,13 @@ import jsonschema
 import pytest
 import yaml
 
-from eigs.events import cli as edi_cli
-from eigs.events.options import CONFIG_KEYS as EDI_KEYS
-from eigs.events.options import EdiOptions
+from eigs.edi import cli as edi_cli
+from eigs.edi.options import CONFIG_KEYS as EDI_KEYS
+from eigs.edi.options import EdiOptions
+from eigs.init import cli as init_cli
+from eigs.init.options import INIT_CONFIG_KEYS, InitOptions
 from eigs.sfm import cli as sfm_cli
-from eigs.sfm import init_cli
-from eigs.sfm.options import INIT_CONFIG_KEYS, SFM_CONFIG_KEYS, ColmapOptions, InitOptions, SfmConfig, sfm_config
+from eigs.sfm.options import SFM_CONFIG_KEYS, ColmapOptions, SfmConfig, sfm_config
 
 REPO = Path(__file__).resolve().parents[1]
 SCHEMA = yaml.safe_load((REPO / "workflow" / "schemas" / "config.schema.yaml").read_text())
@@ -120,3 +121,17 @@ def test_rules_pass_the_config_section_unchanged(tmp_path):
     }
     edi = edi_cli.options(_parse(edi_cli, ["s", "-o", "e", "--config", json.dumps(passed["edi"])]))
     assert edi == EdiOptions(mask_top=0.02, per_pixel_threshold=False)
+
+
+def test_schema_enums_are_the_codes():
+    """Every enum of a stage section in the schema is the tuple the code accepts (``CHOICES`` of the options module,
+    what eigs.plan.check_sections checks; the schema repeats it for `snakemake --lint` and editors, and this test
+    fails when the two drift)."""
+    from eigs.edi.options import CHOICES as EDI_CHOICES
+    from eigs.sfm.options import CHOICES as SFM_CHOICES
+
+    code = {**{("edi", k): tuple(v) for k, v in EDI_CHOICES.items()},
+            **{("sfm", k): tuple(v) for k, v in SFM_CHOICES.items()}}  # fmt: skip
+    schema = {(section, key): tuple(spec["enum"]) for section in STAGES
+              for key, spec in SCHEMA["properties"][section]["properties"].items() if "enum" in spec}  # fmt: skip
+    assert schema == code

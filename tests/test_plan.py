@@ -94,3 +94,35 @@ def test_planning_needs_no_torch():
     code = ("import sys, yaml; from eigs import plan; plan.jobs(yaml.safe_load(open('config/config.yaml'))); "
             "assert 'torch' not in sys.modules")  # fmt: skip
     subprocess.run([sys.executable, "-c", code], cwd=REPO, check=True, timeout=120)
+
+
+@pytest.mark.parametrize(
+    ("section", "words"),
+    [
+        ({"edi": {"mode": "exact"}}, ["config: edi: mode", "'exact' is not one of auto, estimated, e2nerf"]),
+        ({"edi": {"treshold": 0.2}}, ["config: edi", "unknown option(s) treshold", "accepted: mode, bins"]),
+        ({"sfm": {"matcher": "vocab"}}, ["config: sfm: matcher", "not one of auto, exhaustive, sequential"]),
+        ({"init": {"points": 5}}, ["config: init", "unknown option(s) points", "accepted: min_points"]),
+        ({"scenes": {"a": {"builtin": "toy", "sfm": {"mode": "glomap"}}}}, ["config: scene a: sfm: mode"]),
+    ],
+)
+def test_stage_sections_fail_on_one_line_naming_the_key(section, words):
+    from eigs.errors import EigsError
+
+    with pytest.raises(EigsError) as err:
+        plan.check_sections({"scenes": {"toy": {"builtin": "toy"}}, **section})
+    msg = str(err.value)
+    assert "\n" not in msg and all(w in msg for w in words), msg
+    plan.check_sections(merge_configs([yaml.safe_load((REPO / "config" / "config.yaml").read_text())]))
+
+
+def test_a_dry_run_names_a_bad_stage_option(tmp_path):
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text("scenes:\n  toy: {builtin: toy}\nsfm: {matcher: vocab}\n")
+    proc = subprocess.run(
+        [sys.executable, "-m", "snakemake", "all", "-n", "--cores", "1", "-s", str(REPO / "workflow" / "Snakefile"),
+         "--directory", str(tmp_path / "w"), f"--configfile={cfg}"],
+        capture_output=True, text=True, check=False, timeout=300,
+    )  # fmt: skip
+    assert proc.returncode != 0
+    assert "config: sfm: matcher: 'vocab' is not one of auto, exhaustive, sequential" in proc.stdout + proc.stderr

@@ -44,7 +44,7 @@ def benchmark(path, wall, cpu):
 
 
 def run_folder(d, scene, run):
-    """A finished run folder as eigs.train.loop.write_run leaves it (model, config.json, train_log.csv)."""
+    """A finished run folder as eigs.train.gaussian.trainer.write_run leaves it (model, config.json, train_log.csv)."""
     d.mkdir(parents=True)
     (d / "model.ply").write_bytes(b"ply\nformat binary_little_endian 1.0\nend_header\n" + bytes(4000))
     spec = CONFIG["runs"][run]

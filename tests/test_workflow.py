@@ -73,7 +73,7 @@ def test_invalid_config_is_rejected(tmp_path):
 def test_every_ingest_format_plans(tmp_path):
     """A config naming each format `eigs ingest` reads plans under `snakemake -n` (one ingest job per scene); a format
     it does not read fails the dry run on one line naming the scene, the value and the accepted formats."""
-    from eigs.io import FORMATS
+    from eigs.ingest import FORMATS
 
     assert len(FORMATS) == 9
     scenes = {}
@@ -99,15 +99,15 @@ def test_every_ingest_format_plans(tmp_path):
 
 
 def test_schema_cannot_drift_from_the_ingest_formats():
-    """The schema types `format` but lists no formats: the list lives in eigs.io.FORMATS alone (the CLI's choices
+    """The schema types `format` but lists no formats: the list lives in eigs.ingest.FORMATS alone (the CLI's choices
     and the planner's check read it), so a format added to the code is accepted by the workflow at once."""
-    from eigs.io import FORMATS
-    from eigs.io.cli import add_arguments
+    from eigs.ingest import FORMATS
+    from eigs.ingest.cli import add_arguments
 
     schema = yaml.safe_load((REPO / "workflow" / "schemas" / "config.schema.yaml").read_text())
     ingested = schema["properties"]["scenes"]["additionalProperties"]["oneOf"][1]["properties"]
     assert ingested["format"]["type"] == "string" and "enum" not in ingested["format"]
-    assert "eigs.io.FORMATS" in ingested["format"]["description"]
+    assert "eigs.ingest.FORMATS" in ingested["format"]["description"]
     import argparse
 
     parser = argparse.ArgumentParser()

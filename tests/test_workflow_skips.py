@@ -6,7 +6,7 @@ a run several tables use trains once; a config change that does not touch a stag
 params trigger, on outputs marked up to date with `--touch`).
 
 Skips inside a job are tested where they happen: `--no-events` and a scene whose file has no events pass every view
-through as sharp (tests/events/test_cli.py, tests/events/test_edi.py), as do views without motion
+through as sharp (tests/edi/test_cli.py, tests/edi/test_edi.py), as do views without motion
 (tests/synth/test_still_views.py), and a sharp view trains on one render without event loss
 (tests/train/test_deblur.py::test_sharp_views_use_one_render); scenes without ground truth are scored by BRISQUE only
 and synthetic scenes by reference metrics only (tests/evaluate/test_evaluate.py)."""

@@ -19,18 +19,18 @@ from eigs.errors import EigsError
 from eigs.util.memory import keep_freed_memory
 
 # subcommand name -> module path (in pipeline order). A subcommand is named for what it does and lives in the
-# package of its stage: ingest -> io (readers of outside formats), edi -> events, init -> sfm (it reads the SfM
-# model), resources -> metrics (the model files the metrics need), render -> train (it renders a run folder);
+# package of its stage (ingest, edi, sfm, init, train, evaluate, tables are packages of those names); resources ->
+# metrics (the model files the metrics need), render -> evaluate (it renders a run folder, as evaluation does);
 # status -> util (it reads the logs every stage writes, beside the progress bars of eigs.util.progress).
 COMMANDS: dict[str, str] = {
     "scene": "eigs.scene.cli",
     "synth": "eigs.synth.cli",
-    "ingest": "eigs.io.cli",
-    "edi": "eigs.events.cli",
+    "ingest": "eigs.ingest.cli",
+    "edi": "eigs.edi.cli",
     "sfm": "eigs.sfm.cli",
-    "init": "eigs.sfm.init_cli",
+    "init": "eigs.init.cli",
     "train": "eigs.train.cli",
-    "render": "eigs.train.render_cli",
+    "render": "eigs.evaluate.render_cli",
     "view": "eigs.view.cli",
     "video": "eigs.view.video_cli",
     "evaluate": "eigs.evaluate.cli",

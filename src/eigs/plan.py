@@ -16,10 +16,16 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from eigs.events.options import DEFAULT_BINS
-from eigs.io import FORMATS
-from eigs.sfm.options import SfmConfig
+from eigs.artifacts import run as run_folder
+from eigs.edi.options import CHOICES as EDI_CHOICES
+from eigs.edi.options import CONFIG_KEYS as EDI_KEYS
+from eigs.edi.options import DEFAULT_BINS
+from eigs.ingest import FORMATS
+from eigs.init.options import INIT_CONFIG_KEYS
+from eigs.sfm.options import CHOICES as SFM_CHOICES
+from eigs.sfm.options import SFM_CONFIG_KEYS, SfmConfig
 from eigs.train import catalog
+from eigs.util.options import check_section
 
 Config = Mapping[str, Any]
 
@@ -101,7 +107,7 @@ def scene_has_ground_truth(config: Config, scene: str) -> bool:
 
 
 def edi_bins(config: Config) -> list[int]:
-    """The configured bin counts (`edi: bins:`, default [eigs.events.options.DEFAULT_BINS])."""
+    """The configured bin counts (`edi: bins:`, default [eigs.edi.options.DEFAULT_BINS])."""
     return [int(b) for b in config.get("edi", {}).get("bins", [DEFAULT_BINS])]
 
 
@@ -171,18 +177,32 @@ def run_scenes(config: Config, run: str) -> list[str]:
 
 
 def run_model_file(config: Config, run: str) -> str:
-    """The model file of a run folder: model.npz for a radiance-field method (docs/training.md), else model.ply."""
-    return "model.npz" if is_field_method(runs(config)[run]["method"]) else "model.ply"
+    """The model file of a run folder, its method's family's (:attr:`eigs.train.catalog.MethodSpec.model_file`:
+    ``model.npz`` for a radiance-field method, else ``model.ply``; :mod:`eigs.artifacts.run`)."""
+    return catalog.method(runs(config)[run]["method"]).model_file
 
 
 def gaussian_runs(config: Config) -> list[str]:
     """Runs of rule train."""
-    return sorted(r for r in runs(config) if run_model_file(config, r) == "model.ply")
+    return sorted(r for r in runs(config) if run_model_file(config, r) == run_folder.MODEL_PLY)
 
 
 def field_runs(config: Config) -> list[str]:
     """Runs of rule train_field."""
-    return sorted(r for r in runs(config) if run_model_file(config, r) == "model.npz")
+    return sorted(r for r in runs(config) if run_model_file(config, r) == run_folder.MODEL_NPZ)
+
+
+def check_sections(config: Config) -> None:
+    """The stage sections (``edi:``, ``sfm:`` globally and per scene, ``init:``) checked against their options
+    dataclasses (:func:`eigs.util.options.check_section`: known keys, the values of the enum keys), before the
+    schema, so that a typo fails the dry run on one line naming the key and the accepted keys or values."""
+    check_section("config: edi", config.get("edi"), EDI_KEYS, EDI_CHOICES)
+    check_section("config: sfm", config.get("sfm"), SFM_CONFIG_KEYS, SFM_CHOICES)
+    check_section("config: init", config.get("init"), INIT_CONFIG_KEYS, {})
+    scenes = config.get("scenes")
+    for scene, spec in (scenes.items() if isinstance(scenes, Mapping) else ()):
+        if isinstance(spec, Mapping):
+            check_section(f"config: scene {scene}: sfm", spec.get("sfm"), SFM_CONFIG_KEYS, SFM_CHOICES)
 
 
 def check(config: Config) -> None:

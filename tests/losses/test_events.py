@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from eigs.events import edi
+from eigs.edi import edi
 from eigs.losses.events import (
     LOG_EPS,
     e2nerf_event_loss,

@@ -15,7 +15,7 @@ from eigs.errors import EigsError
 from eigs.render.field import LINE_AXES, PLANE_AXES, FieldTensors, VMFactors, pixel_rays, render_rays, vm_query
 from eigs.render.volume import ray_aabb
 from eigs.render.volume_reference import composite_ray
-from eigs.train.field_factors import grow_vm, make_vm, vm_arrays, vm_from_leaves, vm_tv_grad_
+from eigs.train.field.factors import grow_vm, make_vm, vm_arrays, vm_from_leaves, vm_tv_grad_
 
 DIMS = (7, 5, 4)  # R_x, R_y, R_z
 

@@ -11,8 +11,8 @@ from eigs.artifacts.field import FieldArrays, read_field, write_field
 from eigs.render.field import FieldTensors, pixel_rays, query, render_rays, warp_coords
 from eigs.render.volume import ray_aabb
 from eigs.render.volume_reference import composite_ray
-from eigs.train.field_config import FieldOptions
-from eigs.train.field_model import core_box, grid_shape, make_warp, warp_np
+from eigs.train.field.model import core_box, grid_shape, make_warp, warp_np
+from eigs.train.field.options import FieldOptions
 
 LO, HI = np.array([-2.0, -1.5, -1.0]), np.array([2.0, 2.5, 0.5])
 CORE = (np.array([-0.5, -0.4, -0.8]), np.array([0.7, 0.4, 0.1]))

@@ -1,4 +1,4 @@
-"""Scene and EDI files rendered by the test ray caster (independent of eigs.synth and eigs.events)."""
+"""Scene and EDI files rendered by the test ray caster (independent of eigs.synth and eigs.edi)."""
 
 from __future__ import annotations
 

@@ -14,7 +14,7 @@ import pytest
 
 from eigs.artifacts.edi import write_edi
 from eigs.artifacts.poses import METHOD_REGISTERED, read_poses, read_test_cameras
-from eigs.events.pipeline import EdiOptions, compute_edi
+from eigs.edi.pipeline import EdiOptions, compute_edi
 from eigs.sfm.run import SfmConfig, run_sfm
 from eigs.synth.generate import generate, write_generated
 

@@ -8,7 +8,7 @@ from plyfile import PlyData
 
 from eigs.artifacts.gaussians import SH_C0, read_gaussian_ply, write_gaussian_ply
 from eigs.errors import EigsError
-from eigs.sfm.init import gaussians_from_points, initialize
+from eigs.init.initialize import gaussians_from_points, initialize
 
 
 def test_ply_round_trip_and_layout(tmp_path):

@@ -1,6 +1,6 @@
 """EDI under extreme counts, thresholds from 0.01 to 2, and black or saturated pixels.
 
-Extends tests/events/test_edi.py (whose hypothesis test checks finiteness for c ≤ 1): here every mode is checked
+Extends tests/edi/test_edi.py (whose hypothesis test checks finiteness for c ≤ 1): here every mode is checked
 against an independent evaluation — E²NeRF's formula as ratios of sums evaluated per frame, the blur-formation
 identity (the latent frames average back to the blurry frame), and a brute-force exposure integral over every
 microsecond — and the whole stage must produce a valid artifact.
@@ -15,8 +15,8 @@ from hypothesis import example, given
 from hypothesis import strategies as st
 
 from eigs.artifacts.edi import read_edi, write_edi
-from eigs.events.edi import ExposureIntegral, edi_continuous, edi_discrete, edi_e2nerf
-from eigs.events.pipeline import EdiOptions, compute_edi
+from eigs.edi.edi import ExposureIntegral, edi_continuous, edi_discrete, edi_e2nerf
+from eigs.edi.pipeline import EdiOptions, compute_edi
 from eigs.scene import BinnedEvents, Camera, Events, Frames, Scene
 from tests.stress.budget import stress
 
@@ -64,7 +64,7 @@ def test_e2nerf_mode_matches_the_ratio_reference(bins, c, pix):
 @stress(60)
 @given(bins=st.lists(BIN_COUNTS, min_size=1, max_size=6), c=THRESHOLDS, pix=PIXELS, srgb=st.booleans())
 def test_discrete_estimated_frames_average_back_to_the_blurry_frame(bins, c, pix, srgb):
-    from eigs.events.edi import LOG_EPS, to_linear
+    from eigs.edi.edi import LOG_EPS, to_linear
 
     cum = np.array([0, *np.cumsum(bins).tolist()], np.int64).reshape(-1, 1, 1)
     lin = to_linear(np.full((1, 1, 1), pix, np.uint8), "srgb" if srgb else "linear")
@@ -106,7 +106,7 @@ def test_exposure_integral_matches_a_per_microsecond_sum(ev, c, t_ref, pix):
     lin = np.full((1, 1, 1), pix / 255.0)
     lat = edi_continuous(lin, e.reshape(-1, 1, 1), integ.log_mean_exp(c), c)
     assert np.all(np.isfinite(lat))
-    from eigs.events.edi import LOG_EPS
+    from eigs.edi.edi import LOG_EPS
 
     assert abs(np.mean(lat[:, 0, 0, 0] + LOG_EPS) - (pix / 255.0 + LOG_EPS)) <= 1e-9 * (pix / 255.0 + LOG_EPS)
 

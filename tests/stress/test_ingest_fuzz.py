@@ -13,8 +13,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from eigs.errors import EigsError
-from eigs.io import ingest
-from eigs.io.options import IngestOptions
+from eigs.ingest import ingest
+from eigs.ingest.options import IngestOptions
 from eigs.scene import read_scene
 from tests.stress.budget import stress
 from tests.stress.test_readers_fuzz import Originals, assert_one_line_naming, damage, mutations
@@ -31,9 +31,9 @@ def _events(n=400, seed=0):
 @pytest.fixture(scope="module")
 def recordings(tmp_path_factory) -> Originals:
     """format name → (file name, bytes) of a small valid recording, plus the options to ingest it."""
-    from tests.io.prophesee_writer import known_events, write_dat, write_raw
-    from tests.io.test_aedat_legacy import _events as aedat_events
-    from tests.io.test_aedat_legacy import write_aedat20, write_aedat31
+    from tests.ingest.prophesee_writer import known_events, write_dat, write_raw
+    from tests.ingest.test_aedat_legacy import _events as aedat_events
+    from tests.ingest.test_aedat_legacy import write_aedat20, write_aedat31
 
     root = tmp_path_factory.mktemp("rec")
     out = Originals()

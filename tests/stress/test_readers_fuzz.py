@@ -46,7 +46,7 @@ class Originals(dict):
 def originals(tmp_path_factory) -> Originals:
     """name → (file name, bytes) of every valid artifact of the toy scene and a run checkpoint."""
     from eigs.train.config import TrainConfig
-    from eigs.train.loop import Trainer
+    from eigs.train.gaussian.trainer import Trainer
 
     root = tmp_path_factory.mktemp("orig")
     paths = toy.write_all(root)
@@ -213,7 +213,7 @@ test_fuzz_ply = _fuzz("init")
 
 def _fresh_trainer():
     from eigs.train.config import TrainConfig
-    from eigs.train.loop import Trainer
+    from eigs.train.gaussian.trainer import Trainer
 
     return Trainer(toy.train_data(), TrainConfig(steps=10), torch.device("cpu"))
 
@@ -242,7 +242,7 @@ def test_damaged_checkpoints_are_ignored_or_resume_finite(originals, fresh_param
         path.write_bytes(bad)
     tr = _fresh_trainer()
     caplog.clear()
-    with caplog.at_level(logging.WARNING, logger="eigs.train.loop"):
+    with caplog.at_level(logging.WARNING, logger="eigs.train.gaussian.trainer"):
         resumed = tr.load_checkpoint(path)
     if not resumed:
         assert any(str(path) in r.getMessage() for r in caplog.records), caplog.text
@@ -285,7 +285,7 @@ def test_checkpoint_with_damaged_adam_state_is_ignored(originals, fresh_params, 
     path = tmp_path_factory.mktemp("ckpt") / fname
     torch.save(state, path)
     tr = _fresh_trainer()
-    with caplog.at_level(logging.WARNING, logger="eigs.train.loop"):
+    with caplog.at_level(logging.WARNING, logger="eigs.train.gaussian.trainer"):
         assert not tr.load_checkpoint(path)
     assert any(str(path) in r.getMessage() and "optimizer" in r.getMessage() for r in caplog.records), caplog.text
     for k, v in fresh_params.items():

@@ -23,8 +23,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from eigs.errors import EigsError
-from eigs.io import ingest
-from eigs.io.options import IngestOptions
+from eigs.ingest import ingest
+from eigs.ingest.options import IngestOptions
 from eigs.scene import read_scene
 from tests.stress.budget import stress
 from tests.stress.test_readers_fuzz import assert_one_line_naming, damage, mutations
@@ -81,7 +81,7 @@ def raw_messages(path: Path) -> list[tuple[str, int, bytes]]:
     """(topic, log time ns, message bytes) of every message in log-time order, through rosbags directly."""
     from rosbags.highlevel import AnyReader
 
-    from eigs.io.rosbag import typestore
+    from eigs.ingest.rosbag import typestore
 
     with AnyReader([path], default_typestore=typestore()) as r:
         return [(c.topic, t, bytes(raw)) for c, t, raw in r.messages()]
@@ -96,7 +96,7 @@ def scene():
 
 @pytest.fixture(scope="module")
 def bags(scene, tmp_path_factory) -> dict[str, Bag]:
-    from tests.io.test_rosbag import write_bag
+    from tests.ingest.test_rosbag import write_bag
 
     out = {}
     for kind in KINDS:

@@ -27,7 +27,7 @@ def _one_line_naming(err: EigsError, path: Path | str | None) -> None:
 @stress(60)
 @given(st.one_of(st.binary(max_size=200), st.lists(st.floats(allow_nan=True, allow_infinity=True), max_size=12)))
 def test_homography_file(tmp_path_factory, content):
-    from eigs.io.sync import parse_homography
+    from eigs.ingest.sync import parse_homography
 
     path = tmp_path_factory.mktemp("h") / "H.txt"
     if isinstance(content, bytes):
@@ -45,7 +45,7 @@ def test_homography_file(tmp_path_factory, content):
 @stress(100)
 @given(st.text(max_size=40))
 def test_time_offset_option(text):
-    from eigs.io.sync import parse_time_offset
+    from eigs.ingest.sync import parse_time_offset
 
     try:
         got = parse_time_offset(text)

@@ -17,7 +17,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from eigs.train.config import TrainConfig
-from eigs.train.loop import Trainer
+from eigs.train.gaussian.trainer import Trainer
 from tests.stress import toy
 from tests.stress.budget import stress
 

@@ -55,7 +55,7 @@ def c2w_ring(scale: float = 1.0) -> np.ndarray:
 
 def render_frames(truth: GaussianCloud, c2w: np.ndarray) -> np.ndarray:
     """uint8 (N, H, W, 3) renders of ``truth`` at ``c2w`` (N, 4, 4) on a black background."""
-    from eigs.train.model import GaussianModel
+    from eigs.train.gaussian.model import GaussianModel
 
     model = GaussianModel.from_cloud(truth, 0, 3, torch.device("cpu"))
     imgs = []

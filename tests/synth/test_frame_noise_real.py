@@ -1,6 +1,6 @@
-"""The APS noise of the real DAVIS346 recording (../shared/data/real/davis346_lab, read through eigs.io.aedat4; skips
-locally without it, fails under CI=true): the figures docs/synthetic.md reports ("Frame noise"), and the configured
-davis346 model against them."""
+"""The APS noise of the real DAVIS346 recording (../shared/data/real/davis346_lab, read through
+eigs.ingest.aedat4; skips locally without it, fails under CI=true): the figures docs/synthetic.md reports ("Frame
+noise"), and the configured davis346 model against them."""
 
 from __future__ import annotations
 

@@ -8,7 +8,8 @@ import pytest
 
 from eigs.errors import EigsError
 from eigs.scene import read_scene, write_scene
-from eigs.synth.generate import blur_extent, decode, encode, generate, intrinsics, write_generated
+from eigs.synth.generate import blur_extent, generate, intrinsics, write_generated
+from eigs.synth.response import decode, encode
 from eigs.synth.scenes import DEFAULTS, SCENE_NAMES, get_spec, resolve_params
 from eigs.synth.simulator import log_luma
 from eigs.synth.trajectory import look_at, so3_exp

@@ -8,8 +8,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from eigs.edi.pipeline import EdiOptions, compute_edi
 from eigs.errors import EigsError
-from eigs.events.pipeline import EdiOptions, compute_edi
 from eigs.synth.generate import build_path, generate
 from eigs.synth.scenes import get_spec, resolve_params
 from eigs.synth.trajectory import still_view_indices

@@ -7,8 +7,8 @@ from __future__ import annotations
 import pytest
 import torch
 
-from eigs.train import ade as ade_module
-from eigs.train.ade import ADE, FusedMLP
+from eigs.train.gaussian import ade as ade_module
+from eigs.train.gaussian.ade import ADE, FusedMLP
 
 
 def grads(net: ADE, x: torch.Tensor, pose: torch.Tensor, v: torch.Tensor, fused: bool) -> tuple[torch.Tensor, dict]:

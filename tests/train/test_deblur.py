@@ -16,9 +16,9 @@ from eigs.losses.events import event_integration_loss, log_intensity
 from eigs.render.gaussians import render_gaussians
 from eigs.train.config import TrainConfig
 from eigs.train.data import load_train_data
-from eigs.train.loop import Trainer
-from eigs.train.rigid import quat_multiply, rotmat_to_quat, transform_gaussians
-from eigs.train.strategy import quat_to_rotmat
+from eigs.train.gaussian.rigid import quat_multiply, rotmat_to_quat, transform_gaussians
+from eigs.train.gaussian.strategy import quat_to_rotmat
+from eigs.train.gaussian.trainer import Trainer
 
 
 @pytest.fixture(scope="module")

@@ -20,10 +20,10 @@ from eigs.render.field import FieldTensors, render_image
 from eigs.train.catalog import field_methods, method_class
 from eigs.train.config import TrainConfig
 from eigs.train.data import load_train_data
-from eigs.train.field_factors import vm_dims
-from eigs.train.field_loop import FieldTrainer, field_held_out_psnr, train_field
-from eigs.train.field_methods import FieldMethod
-from eigs.train.loop import partial_dir_of
+from eigs.train.field.factors import vm_dims
+from eigs.train.field.methods import FieldMethod
+from eigs.train.field.trainer import FieldTrainer, field_held_out_psnr, train_field
+from eigs.train.gaussian.trainer import partial_dir_of
 
 # small and fast: the toy scene is 64 × 48 with 8 training views
 SMALL = {"batch_rays": 1024, "n_samples": 48, "voxels_start": 16**3, "voxels_final": 40**3, "grow_at": [0.25, 0.5]}
@@ -177,7 +177,7 @@ def test_checkpoint_without_decay_base_resumes(data, tmp_path, caplog):
     for group in state["grid_opt"]["param_groups"]:
         del group["base_lr"]
     torch.save(state, ckpt)
-    with caplog.at_level(logging.INFO, logger="eigs.train.field_loop"):
+    with caplog.at_level(logging.INFO, logger="eigs.train.field.trainer"):
         res = train_field(data, cfg, tmp_path / "run")
     assert "resumed from" in caplog.text and "at step 20" in caplog.text
     assert int(res.rows[-1]["step"]) == 40

@@ -8,8 +8,8 @@ import torch
 
 from eigs.train.catalog import METHODS, field_methods
 from eigs.train.config import TrainConfig
-from eigs.train.field_config import FieldOptions
-from eigs.train.field_model import FieldModel, warp_np
+from eigs.train.field.model import FieldModel, warp_np
+from eigs.train.field.options import FieldOptions
 from eigs.train.resolve import train_config
 
 

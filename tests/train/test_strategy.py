@@ -9,8 +9,8 @@ import torch
 
 from eigs.artifacts.gaussians import GaussianCloud
 from eigs.train.config import TrainConfig
-from eigs.train.model import GaussianModel, make_optimizer
-from eigs.train.strategy import DensifyStrategy, quat_to_rotmat, remap_gaussians
+from eigs.train.gaussian.model import GaussianModel, make_optimizer
+from eigs.train.gaussian.strategy import DensifyStrategy, quat_to_rotmat, remap_gaussians
 
 
 def _model(n: int = 6, channels: int = 3, degree: int = 1) -> GaussianModel:

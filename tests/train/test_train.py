@@ -17,8 +17,8 @@ from eigs.errors import EigsError
 from eigs.train.catalog import method_class
 from eigs.train.config import TrainConfig
 from eigs.train.data import load_train_data
-from eigs.train.loop import Trainer, held_out_psnr, partial_dir_of, train
-from eigs.train.methods import StepOutput
+from eigs.train.gaussian.methods import StepOutput
+from eigs.train.gaussian.trainer import Trainer, held_out_psnr, partial_dir_of, train
 
 
 @pytest.fixture(scope="module")

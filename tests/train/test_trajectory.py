@@ -14,9 +14,9 @@ from eigs.losses.events import normalized_event_loss
 from eigs.render.gaussians import render_gaussians
 from eigs.train.config import TrainConfig
 from eigs.train.data import load_train_data
-from eigs.train.loop import Trainer
-from eigs.train.rigid import transform_gaussians
-from eigs.train.trajectory import curve_weights, fit_controls, se3_exp, se3_log
+from eigs.train.gaussian.rigid import transform_gaussians
+from eigs.train.gaussian.trainer import Trainer
+from eigs.train.gaussian.trajectory import curve_weights, fit_controls, se3_exp, se3_log
 
 
 def _rodrigues(w: np.ndarray) -> np.ndarray:
@@ -180,7 +180,7 @@ def test_trajectory_options_checked(data):
 
 
 def test_trajectory_method_resumes_bit_identically(data, tmp_path):
-    from eigs.train.loop import train
+    from eigs.train.gaussian.trainer import train
 
     cfg = TrainConfig.from_dict({"method": "bad-gaussians", "steps": 6, "eval_every": 0, "densify": False,
                                  "checkpoint_every": 3, "log_every": 1})  # fmt: skip

@@ -37,12 +37,13 @@ from pathlib import Path
 
 import numpy as np
 
+from eigs.artifacts.run import MODEL_NPZ
 from eigs.errors import EigsError
 from eigs.util.atomic import atomic_path
 
 FIELD_FORMAT = "eigs-field"
 FIELD_VERSION = 3
-FIELD_FILE = "model.npz"
+FIELD_FILE = MODEL_NPZ  # the model file of a field run folder (eigs.artifacts.run)
 _VM_KEYS = ("density_plane", "density_line", "colour_plane", "colour_line")
 
 

@@ -26,13 +26,14 @@ from pathlib import Path
 
 import numpy as np
 
+from eigs.artifacts.run import MOTION
 from eigs.errors import EigsError
 from eigs.util.atomic import atomic_path
 
 MOTION_FORMAT = "eigs-motion"
 FORMAT_VERSION = 1
 MAX_POINTS = 2048  # centres sampled for the motion file (the error metrics are means over points: 2048 is plenty)
-FILE_NAME = "motion.npz"
+FILE_NAME = MOTION  # in the run folder (eigs.artifacts.run)
 
 
 @dataclass

@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from eigs.artifacts import run as run_folder
 from eigs.errors import EigsError
 
 log = logging.getLogger("eigs.evaluate")
@@ -44,11 +45,9 @@ DEFAULT_PATH_FRAMES = 120  # E²NeRF's real protocol: 120 path renders beside th
 
 def read_run_config(run_dir: Path) -> dict[str, Any]:
     """``config.json`` of a finished run (``train``, ``inputs``, ``run`` sections)."""
-    path = run_dir / "config.json"
-    if not path.is_file():
-        raise EigsError(run_dir, "no config.json (not a finished run folder; run `eigs train` first)")
+    doc = run_folder.read_config(run_dir)
+    path = run_dir / run_folder.CONFIG
     try:
-        doc = json.loads(path.read_text())
         int(doc["train"]["sh_degree"])
         float(doc["run"]["train_seconds"])
     except (ValueError, KeyError, TypeError) as err:
@@ -280,7 +279,8 @@ def _score_brisque(
 def motion_metrics(run_dir: Path, scene: Any, timestamps_us: np.ndarray) -> dict[str, Any] | None:
     """The run's motion within the exposures against the ground-truth camera motion (:mod:`eigs.metrics.motion`):
     None when the run models no motion (no ``motion.npz``) or the scene has no ground-truth poses."""
-    from eigs.artifacts.motion import FILE_NAME, read_motion
+    from eigs.artifacts.motion import read_motion
+    from eigs.artifacts.run import MOTION as FILE_NAME
     from eigs.metrics.motion import motion_errors
     from eigs.scene.truth import latent_poses_at
 

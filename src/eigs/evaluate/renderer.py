@@ -15,6 +15,7 @@ import torch
 
 from eigs.artifacts.field import FIELD_FILE, read_field
 from eigs.artifacts.gaussians import GaussianCloud, read_gaussian_ply
+from eigs.artifacts.run import MODEL_PLY
 from eigs.errors import EigsError
 from eigs.render.field import FieldTensors, render_image
 from eigs.render.gaussians import render_gaussians
@@ -55,9 +56,9 @@ def load_model(run_dir: Path, sh_degree: int, channels: int, device: torch.devic
         if field.channels != channels:
             raise EigsError(run_dir / FIELD_FILE, f"the field has {field.channels} channels, the scene {channels}")
         return field
-    ply = run_dir / "model.ply"
+    ply = run_dir / MODEL_PLY
     if not ply.is_file():
-        raise EigsError(run_dir, f"no model.ply or {FIELD_FILE} (not a finished run folder)")
+        raise EigsError(run_dir, f"no {MODEL_PLY} or {FIELD_FILE} (not a finished run folder)")
     cloud = read_gaussian_ply(ply)
     if len(cloud) == 0:
         raise EigsError(ply, "the model has no Gaussians")

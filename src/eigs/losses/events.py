@@ -12,7 +12,7 @@ import torch
 from torch import Tensor
 
 LUMA_WEIGHTS = (0.299, 0.587, 0.114)  # BT.601, as EDI's luma
-LOG_EPS = 1e-3  # ε of ln(Y + ε), as EDI (eigs.events.edi.LOG_EPS; a test checks they agree)
+LOG_EPS = 1e-3  # ε of ln(Y + ε), as EDI (eigs.edi.edi.LOG_EPS; a test checks they agree)
 
 
 def srgb_to_linear(v: Tensor) -> Tensor:

@@ -1,8 +1,8 @@
-"""Camera poses and initial Gaussians: COLMAP (pycolmap) on the EDI latent frames or known poses with
-triangulation only, one canonical frame, test cameras, Sim(3) accuracy report and the 3DGS initialization PLY.
+"""Camera poses: COLMAP (pycolmap) on the EDI latent frames, or known poses with triangulation only, one canonical
+frame, test cameras and the Sim(3) accuracy report.
 
 Modules: :mod:`~eigs.sfm.colmap` (pycolmap wrapper), :mod:`~eigs.sfm.given` (fixed-pose triangulation),
-:mod:`~eigs.sfm.canonical`, :mod:`~eigs.sfm.register` (test cameras), :mod:`~eigs.sfm.align` (Sim(3), ATE),
-:mod:`~eigs.sfm.init` (Gaussian initialization). The artifacts it writes (``poses.h5``, ``test_cameras.h5``, the PLY)
-are defined in :mod:`eigs.artifacts`. See docs/sfm.md.
+:mod:`~eigs.sfm.canonical`, :mod:`~eigs.sfm.register` (test cameras), :mod:`~eigs.sfm.align` (Sim(3), ATE). The
+artifacts it writes (the COLMAP model, ``poses.h5``, ``test_cameras.h5``) are defined in :mod:`eigs.artifacts`; the
+Gaussian initialisation that reads them is the next stage, :mod:`eigs.init`. See docs/sfm.md.
 """

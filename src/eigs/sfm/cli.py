@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import argparse
 
-from eigs.sfm.options import MATCHERS, MODES, SFM_CONFIG_KEYS, ColmapOptions, SfmConfig
+from eigs.sfm.options import DEVICES, MATCHERS, MODES, SFM_CONFIG_KEYS, ColmapOptions, SfmConfig
 
 HELP = "camera poses of the EDI latent frames (COLMAP or given poses), test cameras and an accuracy report"
 _D, _C = SfmConfig(), ColmapOptions()
@@ -51,7 +51,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--feature-scale", type=int, metavar="F", help="SIFT upsampling (default auto)")
     p.add_argument("--max-features", dest="max_num_features", type=int, metavar="N",
                    help=f"SIFT features per image (default {_C.max_num_features})")  # fmt: skip
-    p.add_argument("--device", choices=("auto", "cpu", "cuda"), help=f"pycolmap device (default {_C.device})")
+    p.add_argument("--device", choices=DEVICES, help=f"pycolmap device (default {_C.device})")
     p.add_argument("--seed", type=int, help=f"random seed of COLMAP's RANSAC and mapper (default {_C.seed})")
     p.add_argument("--keep-work", action="store_true", help="keep the database and scratch files in OUT/work")
     p.add_argument("--no-plot", action="store_true", help="skip report.png")

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from eigs.artifacts.colmap import load_pycolmap
 from eigs.errors import EigsError
 from eigs.sfm.options import ColmapOptions
 from eigs.util.image import to_uint8
@@ -31,15 +32,6 @@ FEATURE_TARGET_PX = 256  # upsample until the longer side reaches this (integer 
 # at one thread, 16.4–22.8 s at two; GLOMAP: 33.6–53.5 s at one, 40.9–71.3 s at two; shared 2-core machine).
 # docs/sfm.md, "Reproducibility".
 MAPPER_THREADS = 1
-
-
-def load_pycolmap():
-    """Import pycolmap after cv2: in the other order, using cv2 once pycolmap is loaded aborted the process with
-    "double free or corruption" (opencv-contrib 5.0.0.93 + pycolmap 4.2.1)."""
-    import cv2  # noqa: F401
-    import pycolmap
-
-    return pycolmap
 
 
 def quiet(verbose: bool = False) -> None:

@@ -1,6 +1,6 @@
-"""Options of the ``sfm`` and ``init`` stages: :class:`SfmConfig` (with :class:`ColmapOptions`) and
-:class:`InitOptions` hold every default; the config schema, the rules and the CLIs take theirs from here (see
-``eigs.util.options``). No heavy imports: the CLIs read it for their help text."""
+"""Options of the ``sfm`` stage: :class:`SfmConfig` (with :class:`ColmapOptions`) holds every default; the config
+schema, the rules and the CLI take theirs from here (see ``eigs.util.options``). No heavy imports: the CLI reads it
+for its help text."""
 
 from __future__ import annotations
 
@@ -12,6 +12,9 @@ from eigs.errors import EigsError
 
 MODES = ("auto", "colmap", "given", "model")
 MATCHERS = ("auto", "exhaustive", "sequential")
+DEVICES = ("auto", "cpu", "cuda")
+CONFIG = {"config": True}  # field metadata: a key of the config's `sfm:` section (the COLMAP options sit beside the
+# stage's own there); the others are run control or internal
 
 
 @dataclass
@@ -25,15 +28,15 @@ class ColmapOptions:
     ``seed``: of COLMAP's RANSAC and mapper (two-view verification is seeded only when matching runs on several
     threads: ``colmap.verification_seed``). docs/sfm.md, "Reproducibility"."""
 
-    matcher: str = "auto"
-    global_mapping: bool = False
-    refine_intrinsics: bool = False
-    feature_scale: int | None = None
-    max_num_features: int = 8192
+    matcher: str = field(default="auto", metadata=CONFIG)
+    global_mapping: bool = field(default=False, metadata=CONFIG)
+    refine_intrinsics: bool = field(default=False, metadata=CONFIG)
+    feature_scale: int | None = field(default=None, metadata=CONFIG)
+    max_num_features: int = field(default=8192, metadata=CONFIG)
     sequential_overlap: int | None = None  # default: 3 views' worth of latent images
     num_threads: int = 2
-    device: str = "auto"
-    seed: int = 0
+    device: str = field(default="auto", metadata=CONFIG)
+    seed: int = field(default=0, metadata=CONFIG)
     enhance: bool = True  # contrast-stretch dark frames for SIFT
     # Incremental mapper on small (upsampled) frames: reprojection thresholds in original pixels. COLMAP's
     # defaults (4 px; 12 px for absolute pose) suit megapixel images; on 128×96 frames they admitted wrong
@@ -66,10 +69,10 @@ class SfmConfig:
 
 
 _RUN_CONTROL = ("keep_work", "verbose", "plot", "colmap")
-_COLMAP_CONFIG = ("matcher", "global_mapping", "refine_intrinsics", "feature_scale", "max_num_features", "device",
-                  "seed")  # fmt: skip
+_COLMAP_CONFIG = tuple(f.name for f in fields(ColmapOptions) if f.metadata.get("config"))
 # The keys of the `sfm:` config section (flat: the COLMAP options sit beside the stage's own).
 SFM_CONFIG_KEYS = tuple(f.name for f in fields(SfmConfig) if f.name not in _RUN_CONTROL) + _COLMAP_CONFIG
+CHOICES = {"mode": MODES, "matcher": MATCHERS, "device": DEVICES}  # the keys of `sfm:` that take one of a few values
 
 
 def sfm_config(values: Mapping[str, Any], **run_control: Any) -> SfmConfig:
@@ -83,17 +86,3 @@ def sfm_config(values: Mapping[str, Any], **run_control: Any) -> SfmConfig:
         col["num_threads"] = run_control.pop("num_threads")
     top = {k: v for k, v in values.items() if k not in _COLMAP_CONFIG}
     return SfmConfig(**top, **run_control, colmap=ColmapOptions(**col))
-
-
-@dataclass
-class InitOptions:
-    """``min_points``: with fewer SfM points, ``random`` random Gaussians are added in the scene bounds;
-    ``sh_degree``: spherical-harmonics degree of the colours; ``seed``: of the random Gaussians."""
-
-    min_points: int = 1000
-    random: int = 10_000
-    sh_degree: int = 3
-    seed: int = 0
-
-
-INIT_CONFIG_KEYS = tuple(f.name for f in fields(InitOptions))

@@ -11,14 +11,13 @@ import os
 import numpy as np
 
 from eigs.scene import Scene
+from eigs.synth.response import decode
 from eigs.util.image import linear_to_srgb, to_uint8, write_png
 
 EVENT_SATURATION = 8.0
 
 
 def _display(img_u8: np.ndarray, response: str) -> np.ndarray:
-    from eigs.synth.generate import decode
-
     lin = decode(img_u8, response)
     out = linear_to_srgb(lin) if response != "srgb" else np.asarray(img_u8) / 255.0
     if out.shape[-1] == 1:

@@ -70,7 +70,7 @@ def e2nerf_event_bins(
     scene: Scene, edges_us: np.ndarray, first_edge_us: np.ndarray | None = None
 ) -> np.ndarray:
     """E²NeRF's ``events.pt`` layout: signed net counts (V, B, H·W) float64 of the whole scene's raw events in
-    bins [edges[v,k], edges[v,k+1]) (not :func:`eigs.events.binning.bin_events`, which bins one view's events
+    bins [edges[v,k], edges[v,k+1]) (not :func:`eigs.edi.binning.bin_events`, which bins one view's events
     into (B, H, W) int32 for EDI).
 
     ``edges_us``: (V, B + 1) int64 increasing; ``first_edge_us``: optional (V,) replacement for edges[:, 0]

@@ -13,7 +13,7 @@ pixel (row i, column j) and channel c (each colour channel is treated as its own
 with ``x`` the exposure's mean linear intensity (the clean blurry frame, already dimmed by ``light_level``, so the
 shot noise is that of the scene's light). ``o``, ``k`` and ``g`` are one sensor's: drawn once per scene from the scene
 seed (:func:`draw_fixed_pattern`), the same for every frame; ``e`` and ``n`` are new in every frame (:func:`expose`).
-The generator then clips to [0, 1] and quantises to 8 bits as for noise-free frames (``eigs.synth.generate.encode``).
+The generator then clips to [0, 1] and quantises to 8 bits as for noise-free frames (``eigs.synth.response.encode``).
 Not modelled: dark current and its shot noise, the colour filter array and demosaicing, column-wise temporal noise,
 the 10-bit ADC's own quantisation (the 8-bit one is coarser), non-linearity near full well.
 

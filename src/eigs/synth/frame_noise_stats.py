@@ -2,7 +2,7 @@
 
 For a few consecutive 8-bit frames ``(V, H, W)`` of a still-ish scene and the events around them (the DAVIS346
 recording ``../shared/data/real/davis346_lab``: 3 frames, 4.8 ms exposures; ``bench/aps_noise.py`` reads it through
-``eigs.io.aedat4``), in DN (1/255 of full scale):
+``eigs.ingest.aedat4``), in DN (1/255 of full scale):
 
 - **still, flat pixels** of a frame pair (k, k + 1): no event in the pixel's 5 × 5 neighbourhood from the start of
   exposure k to the end of exposure k + 1, Sobel gradient of the frames' mean below 1 DN/px (the Sobel sum / 8),

@@ -34,10 +34,10 @@ from eigs.scene import (
 )
 from eigs.synth.blur import exposure_mean
 from eigs.synth.raycast import RayCaster
+from eigs.synth.response import encode
 from eigs.synth.scenes import SceneSpec, get_spec, resolve_params
 from eigs.synth.simulator import EventChunk, EventSimulator, SensorParams, log_luma
 from eigs.synth.trajectory import CameraPath, Orbit, Shake, Timeline, spiral_orbit, still_view_indices
-from eigs.util.image import linear_to_srgb, srgb_to_linear, to_uint8
 from eigs.util.progress import progress
 
 log = logging.getLogger(__name__)
@@ -67,18 +67,6 @@ def intrinsics(width: int, height: int, fov_deg: float) -> np.ndarray:
     centres at j + 0.5."""
     f = 0.5 * width / np.tan(np.deg2rad(fov_deg) / 2)
     return np.array([[f, 0.0, width / 2.0], [0.0, f, height / 2.0], [0.0, 0.0, 1.0]])
-
-
-def encode(linear: np.ndarray, response: str) -> np.ndarray:
-    """Linear intensity (any shape, [0, 1]) → uint8: round(255·x) (``linear``) or round(255·sRGB(x)) (``srgb``)."""
-    x = np.clip(np.asarray(linear, dtype=np.float64), 0.0, 1.0)
-    return to_uint8(linear_to_srgb(x) if response == "srgb" else x)
-
-
-def decode(u8: np.ndarray, response: str) -> np.ndarray:
-    """Inverse of :func:`encode` up to quantisation: uint8 → float64 linear intensity in [0, 1]."""
-    x = np.asarray(u8, dtype=np.float64) / 255.0
-    return srgb_to_linear(x) if response == "srgb" else x
 
 
 def blur_extent(

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field, replace
 
 from eigs.tables.collect import RunSummary, is_hidden
 from eigs.tables.paper import CONFIG, CONFIG_COLUMNS, ORACLE_LABEL, TABLES, paper_value
+from eigs.tables.rows import method_label
 
 log = logging.getLogger("eigs.tables")
 
@@ -157,7 +158,7 @@ def build_table(name: str, mapping: dict[str, str | None], runs: dict[str, RunSu
         if run and summary is None:
             log.warning("%s: row %s maps to run %r, which has no evaluated results; paper values only", name, key, run)
         oracle = key == ORACLE_KEY or (summary is not None and summary.method == "oracle")
-        label = ORACLE_LABEL if oracle else spec["rows"].get(key, {}).get("label", key)
+        label = ORACLE_LABEL if oracle else spec["rows"].get(key, {}).get("label") or method_label(key)
         row = Row(key, label, "oracle" if oracle else "method", run, summary, config=CONFIG.get(key, "")
                   if name == "table2" else "")  # fmt: skip
         for col in columns:

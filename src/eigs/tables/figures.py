@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from eigs.artifacts import run as run_folder
 from eigs.errors import EigsError
 from eigs.tables.collect import RunSummary
 
@@ -50,7 +51,7 @@ def _rgb(a: np.ndarray) -> np.ndarray:
 
 
 def run_config(doc: dict[str, Any]) -> dict[str, Any]:
-    p = Path(doc["run_dir"]) / "config.json"
+    p = Path(doc["run_dir"]) / run_folder.CONFIG
     try:
         return json.loads(p.read_text())
     except (OSError, ValueError) as err:
@@ -117,7 +118,7 @@ def qualitative_grid(scene: str, entries: list[tuple[str, Path, dict[str, Any]]]
 
 def read_log(run_dir: str | os.PathLike) -> dict[str, np.ndarray]:
     """Columns of ``train_log.csv`` as float arrays (empty cells NaN)."""
-    p = Path(run_dir) / "train_log.csv"
+    p = Path(run_dir) / run_folder.LOG
     try:
         rows = list(csv.DictReader(p.open()))
     except OSError as err:

@@ -38,6 +38,13 @@ def table1_rows() -> dict[str, str | None]:
     return {k: k for k in keys}
 
 
+def method_label(key: str) -> str:
+    """A row's label where the paper has none: its method's catalog ``label`` when the row key names a method (Table
+    I: row key = method name), else the key."""
+    spec = METHODS.get(key)
+    return (spec.label or spec.name) if spec is not None else key
+
+
 def default_rows() -> dict[str, dict[str, str | None]]:
     """Every table's default mapping: Table I's from the catalog, the others' :data:`DEFAULT_ROWS`."""
     return {"table1": table1_rows(), **{name: dict(rows) for name, rows in DEFAULT_ROWS.items()}}

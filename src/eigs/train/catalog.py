@@ -4,8 +4,10 @@ tools read without importing torch (this module imports none).
 An entry names the method's family (``gaussian``: a 3DGS model, ``model.ply``; ``field``: a radiance field,
 ``model.npz``), the class that trains it (``plugin``, "module:Class", imported only when a run trains), its options
 class and recipe (the defaults that make the method, over the class's), what it reads beyond the blurry frames and
-its default budget. Adding a method is one :class:`MethodSpec` here (or :func:`register` from another module) and
-one class (docs/development.md).
+its default budget. Adding a method is one :class:`MethodSpec` here and one class with its options beside it
+(docs/development.md); another installed package adds its methods through the entry-point group
+:data:`ENTRY_POINTS` (``eigs.methods``): each entry point names a :class:`MethodSpec` (or a list of them), loaded when
+this module is first imported, so every process sees it (the CLI, the workflow while it plans, the tables).
 
 What a method reads is decided by its recipe (default options), not per run:
 
@@ -27,15 +29,32 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from eigs.artifacts.run import MODEL_NPZ, MODEL_PLY
 from eigs.errors import EigsError
 from eigs.train.config import TrainConfig
-from eigs.train.field_config import DeblurNerfOptions, E2NerfOptions, FieldOptions
-from eigs.train.method_options import MultiRenderOptions, TrajectoryOptions
+from eigs.train.field.options import DeblurNerfOptions, E2NerfOptions, FieldOptions
+from eigs.train.gaussian.options import MultiRenderOptions, TrajectoryOptions
 from eigs.train.options import Options, parse_options
 
 GAUSSIAN = "gaussian"
 FIELD = "field"
-MODEL_FILES = {GAUSSIAN: "model.ply", FIELD: "model.npz"}
+ENTRY_POINTS = "eigs.methods"  # the entry-point group of methods from other installed packages
+
+
+@dataclass(frozen=True)
+class Family:
+    """A trainer family: the model file of its run folders and its trainer (``"module:Class"`` on the shared loop,
+    :mod:`eigs.train.loop`), imported only when a run trains."""
+
+    model_file: str
+    trainer: str
+
+
+FAMILIES = {
+    GAUSSIAN: Family(MODEL_PLY, "eigs.train.gaussian.trainer:Trainer"),
+    FIELD: Family(MODEL_NPZ, "eigs.train.field.trainer:FieldTrainer"),
+}
+MODEL_FILES = {name: f.model_file for name, f in FAMILIES.items()}
 
 
 @dataclass(frozen=True)
@@ -43,8 +62,8 @@ class MethodSpec:
     """One method: its name, family, class, options and what it needs (module docstring)."""
 
     name: str
-    family: str  # GAUSSIAN or FIELD
-    plugin: str  # "module:Class", the class that trains it (eigs.train.methods.Method or field_methods.FieldMethod)
+    family: str  # its trainer family: GAUSSIAN or FIELD (FAMILIES)
+    plugin: str  # "module:Class", the class that trains it (a gaussian.methods.Method or field.methods.FieldMethod)
     options: type[Options]  # its options dataclass
     description: str
     recipe: Mapping[str, Any] = field(default_factory=dict)  # its defaults over the options class's
@@ -53,11 +72,17 @@ class MethodSpec:
     needs_trajectory: bool = False
     steps: int = TrainConfig.steps  # default budget when neither the run's options nor --steps set it
     table1: bool = True  # a row of Table I by default (row key = run name = the method's name; eigs.tables.rows)
+    label: str = ""  # its Table I label where the paper has none (eigs.tables.paper); default: its name
 
     @property
     def model_file(self) -> str:
         """The model file of its run folder: ``model.ply`` (Gaussian) or ``model.npz`` (field)."""
-        return MODEL_FILES[self.family]
+        return FAMILIES[self.family].model_file
+
+    @property
+    def trainer(self) -> str:
+        """Its family's trainer, ``"module:Class"`` (:data:`FAMILIES`)."""
+        return FAMILIES[self.family].trainer
 
     def defaults(self) -> Options:
         """Its options with nothing set by a run: the options class's defaults with the recipe over them."""
@@ -79,6 +104,31 @@ def register(spec: MethodSpec) -> MethodSpec:
         raise ValueError(f"method {spec.name}: family must be {' or '.join(MODEL_FILES)}, got {spec.family!r}")
     METHODS[spec.name] = spec
     return spec
+
+
+def load_entry_points(group: str | None = None) -> list[str]:
+    """Register the methods that installed packages declare in the entry-point group ``group`` (default
+    :data:`ENTRY_POINTS`): each entry point loads a :class:`MethodSpec` or a list of them. Their options classes are
+    imported here, so they must import no torch; their ``plugin`` classes only when a run trains. Returns the names
+    registered; a broken entry point raises :class:`EigsError` naming it."""
+    from importlib.metadata import entry_points
+
+    names = []
+    for ep in sorted(entry_points(group=group or ENTRY_POINTS), key=lambda e: e.name):
+        where = f"entry point {ep.name} = {ep.value} ({group or ENTRY_POINTS})"
+        try:
+            loaded = ep.load()
+        except Exception as err:  # any error of another package's import: one line naming it
+            raise EigsError(where, f"cannot load it ({type(err).__name__}: {err})") from None
+        for spec in [loaded] if isinstance(loaded, MethodSpec) else list(loaded):
+            if not isinstance(spec, MethodSpec):
+                raise EigsError(where, f"expected a MethodSpec or a list of them, got {type(spec).__name__}")
+            try:
+                register(spec)
+            except ValueError as err:
+                raise EigsError(where, str(err)) from None
+            names.append(spec.name)
+    return names
 
 
 def method(name: str, where: str = "train") -> MethodSpec:
@@ -104,14 +154,23 @@ def field_methods() -> frozenset[str]:
     return frozenset(n for n, s in METHODS.items() if s.family == FIELD)
 
 
+def _load(target: str) -> Any:
+    module, _, attr = target.partition(":")
+    return getattr(importlib.import_module(module), attr)
+
+
 def method_class(name: str) -> Any:
     """The class that trains ``name``: imports its plugin module (torch) and returns the class."""
-    module, _, cls = method(name).plugin.partition(":")
-    return getattr(importlib.import_module(module), cls)
+    return _load(method(name).plugin)
+
+
+def trainer_class(name: str) -> Any:
+    """The trainer of ``name``'s family (:data:`FAMILIES`): imports its module (torch) and returns the class."""
+    return _load(method(name).trainer)
 
 
 def _gaussian(name: str, plugin: str, description: str, options: type[Options] = Options, **kw: Any) -> None:
-    register(MethodSpec(name, GAUSSIAN, f"eigs.train.{plugin}", options, description, **kw))
+    register(MethodSpec(name, GAUSSIAN, f"eigs.train.gaussian.{plugin}", options, description, **kw))
 
 
 def _multi(name: str, description: str, **kw: Any) -> None:
@@ -127,7 +186,7 @@ def _field(name: str, cls: str, description: str, options: type[Options] = Field
     # issue's 15 minutes per scene, from the measured per-step cost (docs/results.md, "The NeRF columns"); the fields
     # are still improving at this budget
     kw.setdefault("steps", 800)
-    register(MethodSpec(name, FIELD, f"eigs.train.field_methods:{cls}", options, description, **kw))
+    register(MethodSpec(name, FIELD, f"eigs.train.field.methods:{cls}", options, description, **kw))
 
 
 # In Table I's order (the default rows of eigs.tables.rows follow it)
@@ -174,3 +233,5 @@ _gaussian("oracle", "methods:Oracle",
 _multi("eigs-b", "EiGS without the motion-consistency loss (Table II (b))", recipe={"consistency": False},
        needs_events=True, table1=False)  # fmt: skip
 _multi("eigs-minus", "EiGS without the event loss (Table II Ours−)", recipe={"event_loss": "none"}, table1=False)
+# Methods of other installed packages (entry-point group eigs.methods), after the built-in ones
+load_entry_points()

@@ -37,11 +37,11 @@ def run(args: argparse.Namespace) -> int:
     import torch
 
     from eigs.errors import EigsError
-    from eigs.train.catalog import FIELD, METHODS
+    from eigs.train.catalog import FIELD, METHODS, trainer_class
     from eigs.train.config import json_options
     from eigs.train.data import load_train_data
-    from eigs.train.resolve import train_config
-    from eigs.train.run import fit
+    from eigs.train.loop import fit
+    from eigs.train.resolve import resolve_run
 
     if args.list:
         for name, spec in sorted(METHODS.items()):
@@ -52,18 +52,15 @@ def run(args: argparse.Namespace) -> int:
     if missing:
         usage = "eigs train SCENE.h5 EDI.h5 SFM_DIR INIT.ply -o RUN_DIR"
         raise EigsError("eigs train", f"missing {', '.join(missing)}: {usage}")
-    cfg = train_config(json_options(args.config, "--config"), "--config", args.method, args.steps)
+    cfg, options = resolve_run(json_options(args.config, "--config"), "--config", args.method, args.steps)
     if args.device == "cuda" and not torch.cuda.is_available():
         raise EigsError("--device", "cuda requested but no CUDA device is available")
     device = torch.device("cuda" if args.device == "cuda" or (args.device == "auto" and torch.cuda.is_available())
                           else "cpu")  # fmt: skip
     data = load_train_data(args.scene, args.edi, args.sfm, args.init)
     inputs = {"scene": args.scene, "edi": args.edi, "sfm": args.sfm, "init": args.init}
-    if METHODS[cfg.method].family == FIELD:
-        from eigs.train.field_loop import FieldTrainer as trainer
-    else:
-        from eigs.train.loop import Trainer as trainer
-    res = fit(trainer(data, cfg, device), args.output, inputs=inputs)
+    trainer = trainer_class(cfg.method)  # its family's (eigs.train.catalog.FAMILIES)
+    res = fit(trainer(data, cfg, device, options), args.output, inputs=inputs)
     final = res.rows[-1] if res.rows else {}
     size = f"{res.model.n_voxels} voxels" if METHODS[cfg.method].family == FIELD else f"{len(res.model)} Gaussians"
     logging.getLogger("eigs.train").info(

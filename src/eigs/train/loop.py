@@ -1,250 +1,340 @@
-"""The Gaussian methods' trainer (3DGS model, ``model.ply``) on the run shared with the radiance-field methods
-(:mod:`eigs.train.run`: steps, non-finite skip, log, checkpoints and resumption, run folder).
+"""The run every trainer shares (Gaussian: :class:`eigs.train.gaussian.trainer.Trainer`, radiance field:
+:class:`eigs.train.field.trainer.FieldTrainer`): one step's frame with the non-finite skip, checkpoints and resumption,
+the step loop with its log and held-out PSNR, the result record and the run folder.
 
-One step: draw the next training sample (a seeded permutation per epoch), set the means' decayed learning rate,
-the method's loss on that sample, backward, densification statistics, Adam, densify and prune. The run folder holds
-``model.ply`` (3DGS PLY), ``motion.npz`` for methods that model motion within the exposure, ``config.json`` and
-``train_log.csv`` (column ``n_gaussians``).
+A trainer subclasses :class:`RunTrainer` and supplies the model's parts (its hooks): the loss of one step, the
+optimisers' zero-grad and step, what follows the backward pass, its checkpoint state, its held-out render, its log
+and ``config.json`` facts and its model file. :func:`fit` trains one to the end and writes the run folder.
+
+Run folder (``RUN_DIR``): the model file (``model.ply`` or ``model.npz``), ``config.json`` (the resolved options,
+the inputs and the run's facts), ``train_log.csv``. Checkpoints go to the sibling ``RUN_DIR.partial/`` (Snakemake
+deletes a failed job's declared outputs, not this), which is removed once the run folder is complete.
 """
 
 from __future__ import annotations
 
+import csv
+import io
+import json
 import logging
 import math
+import platform
+import shutil
+import time
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
 
-from eigs.artifacts.gaussians import write_gaussian_ply
-from eigs.artifacts.motion import FILE_NAME as MOTION_FILE
-from eigs.artifacts.motion import RunMotion, sample_indices, write_motion
+from eigs import __version__
+from eigs.artifacts import run as run_folder
+from eigs.errors import EigsError
+from eigs.metrics.pixel import psnr_torch
 from eigs.train.config import TrainConfig
 from eigs.train.data import HeldOut, TrainData
-from eigs.train.model import PARAM_NAMES, GaussianModel, make_optimizer, means_lr, scene_extent
-from eigs.train.plugins import make_method
-from eigs.train.run import RunResult, RunTrainer, fit, partial_dir_of, psnr_by_kind
-from eigs.train.strategy import DensifyStrategy
+from eigs.util.atomic import atomic_path
+from eigs.util.digest import files_digest
+from eigs.util.progress import progress
 
-log = logging.getLogger(__name__)
-
-__all__ = ["LOG_COLUMNS", "RunResult", "Trainer", "held_out_psnr", "partial_dir_of", "run_motion", "train"]
-
-ADAM_STATE = ("step", "exp_avg", "exp_avg_sq")  # what torch.optim.Adam keeps per parameter (amsgrad off)
-LOG_COLUMNS = ("step", "wall_s", "loss", "n_gaussians", "psnr_novel", "psnr_blur")
+CHECKPOINT_VERSION = 1
+# the keys of every checkpoint beside a trainer's own (RunTrainer.model_state)
+RUN_STATE = ("step", "torch_rng", "rows", "wall", "bad", "skipped")
 
 
-def _adam_hyperparameters_valid(group: dict) -> bool:
-    """Whether an Adam parameter group's saved hyperparameters are usable: lr finite ≥ 0, eps finite > 0, betas in
-    [0, 1), weight_decay finite ≥ 0."""
-    try:
-        lr, eps, wd = float(group["lr"]), float(group["eps"]), float(group.get("weight_decay", 0.0))
-        b1, b2 = (float(b) for b in group["betas"])
-    except (KeyError, TypeError, ValueError):
-        return False
-    finite = all(math.isfinite(v) for v in (lr, eps, wd, b1, b2))
-    return finite and lr >= 0 and eps > 0 and wd >= 0 and 0 <= b1 < 1 and 0 <= b2 < 1
+@dataclass
+class RunResult:
+    """A finished (or stopped) run: the model and method as trained, the log rows, the training wall-clock seconds
+    and the number of steps skipped for a non-finite loss or gradient."""
+
+    model: Any  # eigs.train.gaussian.model.GaussianModel or eigs.train.field.model.FieldModel
+    method: Any  # eigs.train.gaussian.methods.Method or eigs.train.field.methods.FieldMethod
+    rows: list[dict[str, Any]]
+    train_seconds: float
+    skipped_steps: int
 
 
-def held_out_psnr(model: GaussianModel, held: HeldOut, data: TrainData, sh_degree: int, device: torch.device) -> dict:
-    """Mean per-image PSNR (dB) of 8-bit renders on the held-out novel views and blur views (NaN when none)."""
-    bg = data.background.to(device)
-    return psnr_by_kind(
-        lambda i: model.render(held.c2w[i], held.K[i].to(device), data.width, data.height, bg, sh_degree)[0], held
-    )
+def partial_dir_of(run_dir: str | Path) -> Path:
+    """The checkpoint folder of ``run_dir`` (:func:`eigs.artifacts.run.partial_dir`)."""
+    return run_folder.partial_dir(run_dir)
 
 
-class Trainer(RunTrainer):
-    """One Gaussian run: the model, its Adam and densification, the method's sampling order."""
+def finite_grads(params: list[torch.Tensor]) -> bool:
+    """Whether every gradient of ``params`` is finite (parameters without one count as finite)."""
+    grads = [p.grad for p in params if p.grad is not None]
+    if not grads:
+        return True
+    return bool(torch.stack([torch.isfinite(g).all() for g in grads]).all())
 
-    log = log
-    log_columns = LOG_COLUMNS
 
-    def __init__(self, data: TrainData, cfg: TrainConfig, device: torch.device):
-        self._start(data, cfg, device)
-        self.model = GaussianModel.from_cloud(data.init, cfg.sh_degree, data.channels, device)
-        centres = data.c2w[..., :3, 3].reshape(-1, 3).numpy()
-        self.extent = scene_extent(centres)
-        self.method = make_method(data, cfg, device)
-        self.optimizer = make_optimizer(self.model, cfg, self.extent)
-        for group in self.method.param_groups():
-            self.optimizer.add_param_group(group)
-        self.strategy = DensifyStrategy(cfg, self.extent, data.width, data.height, seed=cfg.seed)
-        self.rng = np.random.default_rng(cfg.seed)
-        self.order: list[int] = []
+@torch.no_grad()
+def psnr_by_kind(render: Callable[[int], torch.Tensor], held: HeldOut | None) -> dict[str, float]:
+    """Mean per-image PSNR (dB) of the 8-bit renders ``render(i)`` (H, W, C in [0, 1]) of the held-out images, by
+    kind: ``psnr_novel`` (novel views) and ``psnr_blur`` (blur views); NaN for a kind without images."""
+    out: dict[str, list[float]] = {"psnr_novel": [], "psnr_blur": []}
+    for i in range(len(held) if held is not None else 0):
+        img = torch.round(render(i).clamp(0, 1) * 255.0) / 255.0
+        p = float(psnr_torch(img.permute(2, 0, 1).cpu(), held.images[i].permute(2, 0, 1)))  # type: ignore[union-attr]
+        out["psnr_novel" if held.kind[i] == 1 else "psnr_blur"].append(p)  # type: ignore[union-attr]
+    return {k: (float(np.mean(v)) if v else math.nan) for k, v in out.items()}
 
-    # ------------------------------------------------------------------ checkpoints
-    def model_state(self) -> dict[str, Any]:
-        return {
-            "params": {n: t.detach().cpu() for n, t in self.model.params.items()},
-            "optimizer": self.optimizer.state_dict(),
-            "strategy": self.strategy.state_dict(),
-            "method": self.method.state_dict(),
-            "rng": self.rng.bit_generator.state,
-            "order": [int(i) for i in self.order],
-        }
 
-    def state_problem(self, state: dict) -> str | None:
-        """What makes ``state`` unusable (missing parts; parameters or Adam moments of the wrong shape or not
-        finite: torch's zip reader checks no CRC, so flipped bytes load silently), or None."""
-        params = state.get("params")
-        if not isinstance(params, dict) or any(not isinstance(params.get(n), torch.Tensor) for n in PARAM_NAMES):
-            return "parameters missing"
-        n = params["means"].shape[0] if params["means"].dim() else -1
-        for name in PARAM_NAMES:
-            t, ref = params[name], self.model.params[name]
-            if t.dim() != ref.dim() or t.shape[0] != n or t.shape[1:] != ref.shape[1:] or t.dtype != ref.dtype:
-                return f"parameter {name} has shape {tuple(t.shape)}"
-            if not bool(torch.isfinite(t).all()):
-                return f"parameter {name} has NaN/Inf values"
-        opt = state.get("optimizer")
-        if not isinstance(opt, dict) or not isinstance(opt.get("state"), dict):
-            return "optimizer state missing"
-        shape_of = {}  # Adam state index → the shape its moments must have (the Gaussian parameters' groups)
-        for group in opt.get("param_groups", []) if isinstance(opt.get("param_groups"), list) else []:
-            if isinstance(group, dict) and group.get("name") in PARAM_NAMES and isinstance(group.get("params"), list):
-                shape_of.update({i: params[group["name"]].shape for i in group["params"]})
-        for index, entry in opt["state"].items():
-            if not isinstance(entry, dict) or any(not isinstance(entry.get(k), torch.Tensor) for k in ADAM_STATE):
-                return f"optimizer state {index} lacks {', '.join(ADAM_STATE)}"
-            if entry["exp_avg"].shape != entry["exp_avg_sq"].shape or (
-                index in shape_of and entry["exp_avg"].shape != shape_of[index]
-            ):
-                return f"optimizer moments {index} have shape {tuple(entry['exp_avg'].shape)}"
-            for key, t in entry.items():
-                if isinstance(t, torch.Tensor) and t.is_floating_point() and not bool(torch.isfinite(t).all()):
-                    return f"optimizer {key} has NaN/Inf values"
-            # Adam divides by sqrt(exp_avg_sq) and by 1 - beta^step: a flipped sign bit or step byte gives NaN steps
-            if entry["exp_avg_sq"].numel() and float(entry["exp_avg_sq"].min()) < 0:
-                return f"optimizer exp_avg_sq {index} has negative values"
-            if entry["step"].numel() != 1 or not float(entry["step"]) >= 1:
-                return f"optimizer step {index} is {entry['step'].tolist()}"
-        for group in opt.get("param_groups", []) if isinstance(opt.get("param_groups"), list) else []:
-            if not isinstance(group, dict) or not _adam_hyperparameters_valid(group):
-                return f"optimizer hyperparameters of group {group.get('name') if isinstance(group, dict) else '?'}"
-        missing = [k for k in ("strategy", "method", "rng", "order") if k not in state]
-        return f"missing {', '.join(missing)}" if missing else super().state_problem(state)
+class RunTrainer(ABC):
+    """One run's state, one step's frame and checkpoints; a subclass adds the model (the abstract hooks below;
+    the others have defaults)."""
 
-    def restore_model(self, state: dict) -> None:
-        for name in PARAM_NAMES:
-            self.model.params[name] = state["params"][name].to(self.device).requires_grad_(True)
-        self.optimizer = make_optimizer(self.model, self.cfg, self.extent)
-        for group in self.method.param_groups():
-            self.optimizer.add_param_group(group)
-        self.method.load_state_dict(state["method"])
-        self.optimizer.load_state_dict(state["optimizer"])
-        self.strategy.load_state_dict(state["strategy"])
-        self.rng.bit_generator.state = state["rng"]
-        self.order = list(state["order"])
+    log: logging.Logger  # the subclass module's logger (tests and users filter by it)
+    inputs_digest: str | None = None  # eigs.util.digest.files_digest of the run's input files (set by fit)
+    log_columns: tuple[str, ...]  # train_log.csv's fixed columns: step, wall_s, loss, the size, psnr_novel, psnr_blur
 
-    # ------------------------------------------------------------------ one step
-    @torch.no_grad()
-    def warm_up(self) -> None:
-        """One untimed render, so a first-use build of the rasterizer does not count as training time."""
-        d = self.data
-        c2w = d.c2w[int(d.reference_views()[0]), 0]
-        self.model.render(c2w, d.K.to(self.device), d.width, d.height, d.background.to(self.device), 0)
+    def _start(self, data: TrainData, cfg: TrainConfig, device: torch.device) -> None:
+        """Set the run's state (step 0, no rows) and seed torch."""
+        self.data, self.cfg, self.device = data, cfg, device
+        torch.manual_seed(cfg.seed)
+        self.step = 0
+        self.rows: list[dict[str, Any]] = []
+        self.wall = 0.0  # training seconds (wall clock)
+        self.bad = 0  # non-finite steps in a row
+        self.skipped = 0
+        self._last: dict[str, float] = {}  # the last good step's loss and terms
 
-    def sh_degree_at(self, step: int) -> int:
-        return min(self.cfg.sh_degree, step // self.cfg.sh_degree_interval)
-
+    # ------------------------------------------------------------------ hooks
+    @abstractmethod
     def forward(self) -> tuple[torch.Tensor, dict[str, float], Any]:
-        cfg, step = self.cfg, self.step
-        if not self.order:
-            self.order = [int(i) for i in self.rng.permutation(self.method.n_samples())]
-        sample = self.order.pop()
-        for group in self.optimizer.param_groups:
-            if group.get("name") == "means":
-                group["lr"] = means_lr(cfg, self.extent, step)
-        out = self.method.step(self.model, sample, step, self.sh_degree_at(step))
-        return out.loss, out.terms, out.infos
+        """Prepare step ``self.step`` (schedules, learning rates) and return its loss, its logged terms and what
+        :meth:`after_backward` needs."""
 
+    @abstractmethod
     def zero_grad(self) -> None:
-        self.optimizer.zero_grad(set_to_none=True)
+        """Clear the gradients of every optimiser."""
 
+    @abstractmethod
     def trained_params(self) -> list[torch.Tensor]:
-        return [p for g in self.optimizer.param_groups for p in g["params"]]
+        """Every tensor the optimisers step (their gradients are checked for NaN/Inf)."""
 
     def after_backward(
         self, loss: torch.Tensor, terms: dict[str, float], aux: Any
     ) -> tuple[torch.Tensor, dict[str, float]]:
-        if self.strategy.active(self.step):
-            self.strategy.after_backward(self.model, aux)
+        """After a finite backward pass of step ``self.step``: the loss and terms to log."""
         return loss, terms
 
+    @abstractmethod
     def optimizer_step(self) -> None:
-        self.optimizer.step()
-        report = self.strategy.after_step(self.step, self.model, self.optimizer)
-        if report is not None and (report.cloned or report.split or report.pruned):
-            log.debug("step %d: cloned %d, split %d, pruned %d -> %d Gaussians", self.step, report.cloned,
-                      report.split, report.pruned, len(self.model))  # fmt: skip
+        """Step the optimisers (``self.step`` already counts this step) and what follows them."""
 
-    # ------------------------------------------------------------------ log and run folder
+    @abstractmethod
+    def model_state(self) -> dict[str, Any]:
+        """The checkpoint's model, optimiser, method and generator state (beside :data:`RUN_STATE`)."""
+
+    def state_problem(self, state: dict) -> str | None:
+        """What makes a checkpoint of this configuration unusable, or None."""
+        missing = [k for k in RUN_STATE if k not in state]
+        return f"missing {', '.join(missing)}" if missing else None
+
+    @abstractmethod
+    def restore_model(self, state: dict) -> None:
+        """Load :meth:`model_state`'s part of ``state``."""
+
+    @abstractmethod
     def held_out(self, step: int) -> dict[str, float]:
-        return held_out_psnr(self.model, self.data.held_out, self.data, self.sh_degree_at(step), self.device)  # type: ignore[arg-type]
+        """Held-out PSNR at ``step`` (:func:`psnr_by_kind`)."""
 
+    @abstractmethod
     def size(self) -> dict[str, Any]:
-        return {"n_gaussians": len(self.model)}
+        """The model-size columns of a log row."""
 
+    @abstractmethod
     def describe(self, step: int, row: dict[str, Any]) -> str:
-        return f"step {step}  {self.wall:.1f} s  {len(self.model)} Gaussians  PSNR novel {row['psnr_novel']:.2f} dB"
+        """The log line of an evaluated step."""
 
+    @abstractmethod
     def log_start(self) -> None:
-        log.info(
-            "%s: %d steps, %d samples, %d Gaussians, extent %.3f, device %s",
-            self.cfg.method, self.cfg.steps, self.method.n_samples(), len(self.model), self.extent, self.device,
-        )  # fmt: skip
+        """Log the run's start (method, steps, model size, device)."""
 
-    def before_steps(self) -> None:
-        self.warm_up()
+    def before_steps(self) -> None:  # noqa: B027 (an optional hook: nothing by default)
+        """Anything to do once before the first step of this process (after resuming)."""
 
+    @abstractmethod
     def facts(self) -> tuple[dict[str, Any], dict[str, Any]]:
-        head = {
-            "method_description": self.method.description,
-            "method_options": self.method.options,
-            "scene": self.data.scene.name,
-            "n_samples": self.method.n_samples(),
-            "extent": self.extent,
-        }
-        return head, {"n_gaussians": len(self.model)}
+        """``config.json``'s model facts: those before ``train_seconds`` and those after ``skipped_steps``."""
 
+    @abstractmethod
     def write_model(self, folder: Path) -> None:
-        write_gaussian_ply(self.model.to_cloud(), folder / "model.ply")
-        motion = run_motion(self)
-        if motion is not None:
-            write_motion(motion, folder / MOTION_FILE)
+        """Write the model file (and any companion file) into ``folder``."""
+
+    # ------------------------------------------------------------------ one step
+    def train_step(self) -> bool:
+        """Run step ``self.step``; False when it was skipped (non-finite loss or gradient)."""
+        step = self.step
+        loss, terms, aux = self.forward()
+        self.zero_grad()
+        ok = bool(torch.isfinite(loss))
+        if ok:
+            loss.backward()
+            ok = finite_grads(self.trained_params())
+        if ok:
+            loss, terms = self.after_backward(loss, terms, aux)
+        self.step += 1
+        if not ok:
+            self.zero_grad()
+            self.bad += 1
+            self.skipped += 1
+            self.log.warning("step %d: non-finite loss or gradient, skipped (%d in a row)", step, self.bad)
+            return False
+        self.bad = 0
+        self.optimizer_step()
+        self._last = {"loss": loss.item(), **terms}
+        return True
+
+    # ------------------------------------------------------------------ checkpoints
+    def state_dict(self) -> dict[str, Any]:
+        return {
+            "version": CHECKPOINT_VERSION,
+            "config": self.cfg.to_dict(),
+            "inputs_digest": self.inputs_digest,
+            "step": self.step,
+            **self.model_state(),
+            "torch_rng": torch.get_rng_state(),
+            "rows": self.rows,
+            "wall": self.wall,
+            "bad": self.bad,
+            "skipped": self.skipped,
+        }
+
+    def save_checkpoint(self, path: Path) -> None:
+        with atomic_path(path) as tmp:
+            torch.save(self.state_dict(), tmp)
+
+    def load_checkpoint(self, path: Path) -> bool:
+        """Resume from ``path``; False (and a warning naming it) when it belongs to another configuration or is
+        unreadable or damaged, the trainer then as freshly built (a checkpoint is a cache: the run starts over)."""
+        log = self.log
+        try:
+            state = torch.load(path, map_location="cpu", weights_only=False)
+        except Exception as err:  # a truncated or foreign file: start over rather than fail
+            log.warning("ignoring unreadable checkpoint %s (%s)", path, str(err).splitlines()[0] if str(err) else err)
+            return False
+        if not isinstance(state, dict):
+            log.warning("ignoring checkpoint %s: not a checkpoint", path)
+            return False
+        if state.get("version") != CHECKPOINT_VERSION or state.get("config") != self.cfg.to_dict():
+            log.warning("ignoring checkpoint %s: written for another configuration", path)
+            return False
+        if state.get("inputs_digest") != self.inputs_digest:
+            # the same options on other data (a rerun SfM, a regenerated scene): resuming would mix the two
+            log.warning("ignoring checkpoint %s: written from other input files", path)
+            return False
+        problem = self.state_problem(state)
+        if problem is None:
+            try:
+                self.restore_model(state)
+                torch.set_rng_state(state["torch_rng"])
+                self.step, self.rows, self.wall = int(state["step"]), list(state["rows"]), float(state["wall"])
+                self.bad, self.skipped = int(state["bad"]), int(state["skipped"])
+            except Exception as err:  # damage the checks cannot see: rebuild and start over
+                problem = f"{type(err).__name__}: {err}".splitlines()[0]
+                self.__init__(self.data, self.cfg, self.device)  # type: ignore[misc]
+        if problem is not None:
+            log.warning("ignoring damaged checkpoint %s (%s)", path, problem)
+            return False
+        log.info("resumed from %s at step %d", path, self.step)
+        return True
 
 
-def train(
-    data: TrainData,
-    cfg: TrainConfig,
-    run_dir: str | Path,
-    device: torch.device | None = None,
-    *,
-    inputs: dict[str, str] | None = None,
-    stop_after: int | None = None,
+def run_steps(tr: RunTrainer, ckpt: Path, run_dir: Path, stop_after: int | None) -> bool:
+    """``tr.train_step()`` from ``tr.step`` to ``cfg.steps`` with the wall clock, the non-finite-streak stop, a log
+    row every ``log_every`` steps (and held-out PSNR every ``eval_every``), checkpoints every ``checkpoint_every``.
+    True when it left at ``stop_after`` (checkpoint written, no outputs)."""
+    cfg = tr.cfg
+    has_held_out = tr.data.held_out is not None
+    for _ in progress(range(tr.step, cfg.steps), desc=f"train {cfg.method}", total=cfg.steps - tr.step, unit="step"):
+        t0 = time.perf_counter()
+        tr.train_step()
+        tr.wall += time.perf_counter() - t0
+        if tr.bad >= cfg.max_bad_steps:
+            tr.save_checkpoint(ckpt)
+            raise EigsError(
+                run_dir,
+                f"{tr.bad} consecutive steps had a non-finite loss or gradient (last at step {tr.step}); the last "
+                f"good state is in {ckpt}",
+            )
+        s = tr.step
+        evaluate = has_held_out and cfg.eval_every and (s % cfg.eval_every == 0 or s == cfg.steps)
+        if s % cfg.log_every == 0 or s == cfg.steps or evaluate:
+            row: dict[str, Any] = {"step": s, "wall_s": round(tr.wall, 4), **tr._last, **tr.size()}
+            if evaluate:
+                row.update(tr.held_out(s))
+                tr.log.info("%s", tr.describe(s, row))
+            tr.rows.append(row)
+        if s % cfg.checkpoint_every == 0 and s < cfg.steps:
+            tr.save_checkpoint(ckpt)
+        if stop_after is not None and s >= stop_after:
+            tr.save_checkpoint(ckpt)
+            return True
+    return False
+
+
+def fit(
+    tr: RunTrainer, run_dir: str | Path, *, inputs: dict[str, str] | None = None, stop_after: int | None = None
 ) -> RunResult:
-    """Train ``cfg.method`` on ``data`` and write the run folder (:func:`eigs.train.run.fit`). ``stop_after``: leave
-    after this many steps (checkpoint written, no outputs) — for tests of resumption."""
-    tr = Trainer(data, cfg, device or torch.device("cpu"))
-    return fit(tr, run_dir, inputs=inputs, stop_after=stop_after)
+    """Train ``tr`` to ``cfg.steps`` (resuming from ``RUN_DIR.partial/checkpoint.pt`` when there is one) and write
+    the run folder. ``inputs`` (name → path): the run's input files, recorded in ``config.json``; a checkpoint
+    resumes only on byte-identical inputs (their digest is in it). ``stop_after``: leave after this many steps
+    (checkpoint written, no outputs) — for tests of resumption."""
+    run_dir = Path(run_dir)
+    ckpt = partial_dir_of(run_dir) / run_folder.CHECKPOINT
+    tr.inputs_digest = files_digest(inputs) if inputs else None
+    if ckpt.exists():
+        tr.load_checkpoint(ckpt)
+    tr.log_start()
+    tr.before_steps()
+    if not run_steps(tr, ckpt, run_dir, stop_after):
+        write_run(tr, run_dir, inputs or {})
+        shutil.rmtree(partial_dir_of(run_dir), ignore_errors=True)
+    return RunResult(tr.model, tr.method, tr.rows, tr.wall, tr.skipped)  # type: ignore[attr-defined]
 
 
-def run_motion(tr: Trainer) -> RunMotion | None:
-    """The motion the trained method applies within the exposures, at a seeded sample of the final Gaussians'
-    centres (:mod:`eigs.artifacts.motion`); None for methods that model none."""
-    p = tr.model.params
-    idx = torch.from_numpy(sample_indices(len(tr.model), tr.cfg.seed)).to(p["means"].device)
-    means, quats = p["means"].detach()[idx], p["quats"].detach()[idx]
-    m = tr.method.latent_motion(means, quats)
-    if m is None:
-        return None
-    return RunMotion(
-        method=tr.cfg.method,
-        points=means.cpu().numpy(),
-        displacement=m.displacement.cpu().numpy(),
-        reference_c2w=m.reference_c2w.cpu().numpy(),
-        views=m.views,
-        camera_c2w=None if m.camera_c2w is None else m.camera_c2w.cpu().numpy(),
-    )
+def log_csv(rows: list[dict[str, Any]], fixed: tuple[str, ...]) -> str:
+    """The rows as CSV: ``fixed`` columns (step, wall_s, loss, then the model size and held-out columns), each
+    method's loss terms in first-seen order after the first three."""
+    extra: list[str] = []
+    for r in rows:
+        for k in r:
+            if k not in fixed and k not in extra:
+                extra.append(k)
+    columns = [*fixed[:3], *extra, *fixed[3:]]
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=columns, restval="", lineterminator="\n")
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: ("" if isinstance(v, float) and math.isnan(v) else v) for k, v in r.items()})
+    return buf.getvalue()
+
+
+def write_run(tr: RunTrainer, run_dir: Path, inputs: dict[str, str]) -> None:
+    """Write the model file, ``config.json`` and ``train_log.csv`` together (atomic directory rename)."""
+    head, tail = tr.facts()
+    facts = {
+        "eigs_version": __version__,
+        "torch_version": torch.__version__,
+        "device": str(tr.device),
+        "threads": torch.get_num_threads(),
+        "machine": platform.machine(),
+        **head,
+        "train_seconds": round(tr.wall, 3),
+        # CPU seconds of this process so far (all threads: data loading, training, writing; a resumed run counts
+        # its last process only): what the job costs alone on a shared machine (Snakemake's benchmark files
+        # sample CPU time every ~30 s and miss up to that much of a job's end)
+        "process_cpu_s": round(time.process_time(), 3),
+        "skipped_steps": tr.skipped,
+        **tail,
+        "final": tr.rows[-1] if tr.rows else {},
+    }
+    doc = {"train": tr.cfg.to_dict(), "inputs": inputs, "run": facts}
+    with atomic_path(run_dir, directory=True) as tmp:
+        tr.write_model(tmp)
+        (tmp / run_folder.CONFIG).write_text(json.dumps(doc, indent=2, default=float) + "\n")
+        (tmp / run_folder.LOG).write_text(log_csv(tr.rows, tr.log_columns))

@@ -15,6 +15,15 @@ from eigs.train.options import Options, unknown_keys
 RUN_KEYS = ["method", "bins", "options", "scenes"]  # the keys of a `runs:` entry (workflow/schemas)
 
 
+def resolve_run(
+    values: Mapping[str, Any], where: str = "train config", method_name: str | None = None, steps: int | None = None
+) -> tuple[TrainConfig, Options]:
+    """A run's :class:`TrainConfig` and its method's parsed options (:func:`train_config`), parsed once: ``eigs
+    train`` hands both to the trainer, which hands the options to the method."""
+    cfg = _config(values, where, method_name, steps)
+    return cfg, method_options(cfg, where)
+
+
 def train_config(
     values: Mapping[str, Any], where: str = "train config", method_name: str | None = None, steps: int | None = None
 ) -> TrainConfig:
@@ -22,6 +31,10 @@ def train_config(
     ``steps`` (the command line's ``--method`` and ``--steps``) over them; without a step count from either, the
     method's own default budget (:attr:`eigs.train.catalog.MethodSpec.steps`). Checks the keys, types and ranges,
     the method and its ``method_options``."""
+    return resolve_run(values, where, method_name, steps)[0]
+
+
+def _config(values: Mapping[str, Any], where: str, method_name: str | None, steps: int | None) -> TrainConfig:
     cfg = TrainConfig.from_dict(dict(values), where)
     spec = method(method_name or cfg.method, where)
     resolved = {**cfg.to_dict(), "method": spec.name}
@@ -29,9 +42,7 @@ def train_config(
         resolved["steps"] = int(steps)
     elif "steps" not in values:
         resolved["steps"] = spec.steps
-    cfg = TrainConfig.from_dict(resolved, "command line" if method_name is not None or steps is not None else where)
-    method_options(cfg, where)
-    return cfg
+    return TrainConfig.from_dict(resolved, "command line" if method_name is not None or steps is not None else where)
 
 
 def method_options(cfg: TrainConfig, where: str | None = None) -> Options:

@@ -37,6 +37,23 @@ def merge(keys: Iterable[str], section: Mapping[str, Any], given: Mapping[str, A
     return {**section, **{k: v for k, v in given.items() if v is not None}}
 
 
+def check_section(where: str, values: Any, keys: Iterable[str], choices: Mapping[str, Iterable[Any]]) -> None:
+    """A stage's config section as the workflow plans it: a mapping of known keys whose ``choices`` keys take one of
+    their values; each error one :class:`EigsError` line naming the key and the accepted keys or values."""
+    if values is None:
+        return
+    if not isinstance(values, Mapping):
+        raise EigsError(where, f"expected a mapping of option → value, got {values!r}")
+    keys = list(keys)
+    unknown = sorted(set(values) - set(keys))
+    if unknown:
+        raise EigsError(where, f"unknown option(s) {', '.join(map(str, unknown))}; accepted: {', '.join(keys)}")
+    for key, accepted in choices.items():
+        accepted = tuple(accepted)
+        if key in values and values[key] not in accepted:
+            raise EigsError(f"{where}: {key}", f"{values[key]!r} is not one of {', '.join(map(str, accepted))}")
+
+
 def flags(args: Any, keys: Iterable[str]) -> dict[str, Any]:
     """The values of ``args`` (an argparse namespace) named ``keys`` (None when not given)."""
     return {k: getattr(args, k, None) for k in keys}

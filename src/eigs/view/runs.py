@@ -20,11 +20,12 @@ from typing import Literal
 
 import numpy as np
 
+from eigs.artifacts import run as run_folder
 from eigs.artifacts.gaussians import SH_C0, GaussianCloud
 from eigs.errors import EigsError
 
-MODEL_GAUSSIANS = "model.ply"
-MODEL_FIELD = "model.npz"
+MODEL_GAUSSIANS = run_folder.MODEL_PLY
+MODEL_FIELD = run_folder.MODEL_NPZ
 RunKind = Literal["gaussians", "field"]
 
 
@@ -152,7 +153,7 @@ def resolve_run(path: str | os.PathLike, *, sfm: str | os.PathLike | None = None
     run = Path(path)
     if not run.is_dir():
         raise EigsError(run, "no such run folder")
-    cfg_path = run / "config.json"
+    cfg_path = run / run_folder.CONFIG
     if not cfg_path.is_file():
         raise EigsError(run, "no config.json (not a finished run folder; run `eigs train` first)")
     try:
@@ -177,7 +178,7 @@ def sibling_runs(run: RunInfo) -> list[Path]:
     folder, so they share its cameras and frame: the runs one can switch between at the same camera."""
     out = []
     for cand in sorted(p for p in run.path.parent.iterdir() if p.is_dir() and p.resolve() != run.path.resolve()):
-        if not (cand / "config.json").is_file():
+        if not (cand / run_folder.CONFIG).is_file():
             continue
         if not ((cand / MODEL_GAUSSIANS).is_file() or (cand / MODEL_FIELD).is_file()):
             continue

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from eigs.artifacts import run as run_folder
 from eigs.errors import EigsError
 from eigs.view.runs import RunInfo
 
@@ -69,7 +70,6 @@ class RunRenderer:
     (the SfM folder's valid training cameras, latent 0, as ``eigs render --cameras orbit``)."""
 
     def __init__(self, run: RunInfo, frames: int, device: str = "auto") -> None:
-        import json
 
         import torch
 
@@ -78,7 +78,7 @@ class RunRenderer:
         from eigs.artifacts.poses import read_poses
         from eigs.render.field import FieldTensors
         from eigs.scene import read_scene
-        from eigs.train.model import GaussianModel
+        from eigs.train.gaussian.model import GaussianModel
         from eigs.util.cameras import render_path
 
         if run.scene is None:
@@ -105,9 +105,9 @@ class RunRenderer:
             self.field = FieldTensors.from_arrays(read_field(run.model), self.device)
         else:
             try:
-                sh_degree = int(json.loads((run.path / "config.json").read_text())["train"]["sh_degree"])
+                sh_degree = int(run_folder.read_config(run.path)["train"]["sh_degree"])
             except (ValueError, KeyError, TypeError, OSError) as err:
-                raise EigsError(run.path / "config.json", f"unreadable run config ({err})") from None
+                raise EigsError(run.path / run_folder.CONFIG, f"unreadable run config ({err})") from None
             self.model = GaussianModel.from_cloud(read_gaussian_ply(run.model), sh_degree, scene.channels,
                                                   self.device)  # fmt: skip
 
