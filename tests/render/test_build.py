@@ -71,12 +71,21 @@ def test_every_csrc_file_is_built_and_hashed() -> None:
 
 def test_a_stale_build_lock_is_removed(tmp_path) -> None:
     """PyTorch's ``lock`` file left in the build folder by a process killed while loading (SIGKILL: no cleanup) does
-    not make the next load wait for ever: the load removes it and returns."""
+    not make the next load wait for ever: the load removes it and returns. On a private copy of the built extension
+    (``EIGS_CACHE_DIR``, times kept so the build stays up to date): in the shared cache another test's load may
+    remove the file first."""
+    import os
+    import shutil
     import subprocess
     import sys
 
-    build = _backend.cache_dir() / "torch_extensions" / f"eigs_render_{_backend.source_hash()}"
+    from eigs.util.cache import ENV
+
     _backend.load()  # built and up to date
+    name = f"eigs_render_{_backend.source_hash()}"
+    build = tmp_path / "torch_extensions" / name
+    shutil.copytree(_backend.cache_dir() / "torch_extensions" / name, build, ignore=shutil.ignore_patterns("lock"))
+    env = {**os.environ, ENV: str(tmp_path)}
     held = subprocess.Popen([sys.executable, "-c", (
         "import fcntl, pathlib, sys, time\n"
         f"b = pathlib.Path({str(build)!r})\n"
@@ -85,7 +94,7 @@ def test_a_stale_build_lock_is_removed(tmp_path) -> None:
         "import os, signal; os.kill(os.getpid(), signal.SIGKILL)\n")])  # fmt: skip
     assert held.wait(timeout=60) == -9
     assert (build / "lock").exists()
-    proc = subprocess.run([sys.executable, "-c", "from eigs.render._backend import load; load()"],
+    proc = subprocess.run([sys.executable, "-c", "from eigs.render._backend import load; load()"], env=env,
                           capture_output=True, text=True, timeout=300, check=False)  # fmt: skip
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "left by a process that died" in proc.stderr
