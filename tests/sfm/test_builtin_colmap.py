@@ -2,9 +2,11 @@
 benchmark in bench/sfm.py).
 
 The default ``blocks`` scene (128×96, 24 training views 15° apart on the orbit, shaken during every exposure, events
-with per-pixel threshold mismatch) with 4 instead of 12 novel views, and B = 2 (72 latent frames): EDI (estimated
-threshold, per-pixel calibration) → COLMAP on the latent PNGs, scored against the ground truth. A few minutes on
-2 cores.
+with per-pixel threshold mismatch) with 4 instead of 12 novel views, 40 rendered sub-frame intervals per exposure and
+20 between exposures instead of 80 and 40 (half the ray casting, its largest cost; the blur still a 41-frame
+average), and B = 2 (72 latent frames): EDI (estimated threshold, per-pixel calibration) → COLMAP on the latent PNGs,
+scored against the ground truth. Measured: all 72 registered, ATE 0.12 % of the extent, median rotation error 0.14°,
+relative latent ratios 0.09 / 0.03 (the bounds below: 1 %, 0.5°, 0.25). About 150 CPU s (185 at 80 sub-frames).
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ from eigs.edi.pipeline import EdiOptions, compute_edi
 from eigs.sfm.run import SfmConfig, run_sfm
 from eigs.synth.generate import generate, write_generated
 
-OVERRIDES = {"n_novel": 4}
+OVERRIDES = {"n_novel": 4, "subframes": 40, "gap_subframes": 20}
 BINS = 2
 
 
