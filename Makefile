@@ -57,7 +57,7 @@ lint: venv
 	$(BIN)/snakemake --lint
 
 test: venv lint
-	$(BIN)/pytest -n $(PYTEST_WORKERS) --dist loadfile --no-loadscope-reorder
+	$(BIN)/pytest -n $(PYTEST_WORKERS) --dist loadfile
 
 # The kill sweep (tests/faults/test_kill.py): the kill config's workflow killed with SIGKILL at 21 seeded instants
 # that hit every rule, recovered each time as README.md says, ending with the uninterrupted run's tables. `make test`

@@ -26,30 +26,6 @@ SHARED = REPO.parent / "shared"
 SHARED_REAL = SHARED / "data" / "real"
 
 
-# The files that cost most, heaviest first (CPU seconds on a fresh clone, EIGS_TEST_CPU_LOG, 2026-11-28: the toy DAG
-# 380, built-in COLMAP 150, kill 121, own data 90, then 60-70 each). `make test` runs pytest-xdist with `--dist loadfile
-# --no-loadscope-reorder`, which hands whole files to the two workers in collection order; collected first, these
-# start first and the many short files fill in around them. xdist's own order (most tests first) started the toy DAG
-# two thirds of the way through, and one worker sat idle for the last 160 s of a 915 s run.
-HEAVIEST_FIRST = (
-    "tests/test_workflow_tables.py",
-    "tests/sfm/test_builtin_colmap.py",
-    "tests/faults/test_kill.py",
-    "tests/test_own_data.py",
-    "tests/test_workflow_skips.py",
-    "tests/faults/test_disk_full.py",
-    "tests/sfm/test_determinism.py",
-    "tests/train/test_field.py",
-    "tests/sfm/test_stage.py",
-)
-
-
-def pytest_collection_modifyitems(session, config, items) -> None:  # noqa: ANN001 (pytest hook)
-    """Collected order: :data:`HEAVIEST_FIRST`'s files in its order, then every other file as collected (stable)."""
-    rank = {name: i for i, name in enumerate(HEAVIEST_FIRST)}
-    items.sort(key=lambda item: rank.get(item.nodeid.split("::", 1)[0], len(rank)))
-
-
 @pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_protocol(item, nextitem):  # noqa: ANN001, ANN201 (pytest hook)
     """With ``EIGS_TEST_CPU_LOG=FILE``: one line per test appended to FILE (each xdist worker its own,
