@@ -15,6 +15,7 @@ import pytest
 import torch
 
 from eigs.artifacts.field import FIELD_FILE, read_field
+from eigs.artifacts.run import partial_dir
 from eigs.errors import EigsError
 from eigs.render.field import FieldTensors, render_image
 from eigs.train.catalog import field_methods, method_class
@@ -23,7 +24,6 @@ from eigs.train.data import load_train_data
 from eigs.train.field.factors import vm_dims
 from eigs.train.field.methods import FieldMethod
 from eigs.train.field.trainer import FieldTrainer, field_held_out_psnr, train_field
-from eigs.train.gaussian.trainer import partial_dir_of
 
 # small and fast: the toy scene is 64 × 48 with 8 training views
 SMALL = {"batch_rays": 1024, "n_samples": 48, "voxels_start": 16**3, "voxels_final": 40**3, "grow_at": [0.25, 0.5]}
@@ -60,7 +60,7 @@ def test_each_method_improves_held_out_psnr(data, tmp_path, method):
     doc = json.loads((run / "config.json").read_text())
     assert TrainConfig.from_dict(doc["train"]) == cfg and doc["run"]["model"] == "field"
     assert doc["run"]["process_cpu_s"] > 0
-    assert not partial_dir_of(run).exists()
+    assert not partial_dir(run).exists()
     # the model file renders what training rendered
     field = read_field(run / FIELD_FILE)
     np.testing.assert_array_equal(field.grid, res.model.grid.detach()[0].numpy())
@@ -172,7 +172,7 @@ def test_checkpoint_without_decay_base_resumes(data, tmp_path, caplog):
     # the grid grows at step 10 only: a growth after the resume would rebuild the optimiser and hide the problem
     cfg = _cfg("nerf", steps=40, checkpoint_every=20, method_options={"grow_at": [0.25]})
     train_field(data, cfg, tmp_path / "run", stop_after=20)
-    ckpt = partial_dir_of(tmp_path / "run") / "checkpoint.pt"
+    ckpt = partial_dir(tmp_path / "run") / "checkpoint.pt"
     state = torch.load(ckpt, weights_only=False)
     for group in state["grid_opt"]["param_groups"]:
         del group["base_lr"]

@@ -13,12 +13,13 @@ import pytest
 import torch
 
 from eigs.artifacts.gaussians import read_gaussian_ply
+from eigs.artifacts.run import partial_dir
 from eigs.errors import EigsError
 from eigs.train.catalog import method_class
 from eigs.train.config import TrainConfig
 from eigs.train.data import load_train_data
 from eigs.train.gaussian.methods import StepOutput
-from eigs.train.gaussian.trainer import Trainer, held_out_psnr, partial_dir_of, train
+from eigs.train.gaussian.trainer import Trainer, held_out_psnr, train
 
 
 @pytest.fixture(scope="module")
@@ -51,7 +52,7 @@ def test_loss_falls_psnr_rises_outputs_reload(data, tmp_path):
     assert TrainConfig.from_dict(doc["train"]) == cfg
     assert doc["run"]["n_gaussians"] == len(cloud)
     assert doc["run"]["process_cpu_s"] > 0  # the job's own CPU seconds (bench/suite_ledger.py reads them)
-    assert not partial_dir_of(run).exists()
+    assert not partial_dir(run).exists()
 
 
 def test_killed_run_resumes_to_the_same_parameters(data, tmp_path):
@@ -59,7 +60,7 @@ def test_killed_run_resumes_to_the_same_parameters(data, tmp_path):
     full = train(data, cfg, tmp_path / "full")
     part = train(data, cfg, tmp_path / "resumed", stop_after=130)  # "killed" after step 130 (checkpoint kept)
     assert len(part.rows) < len(full.rows)
-    assert (partial_dir_of(tmp_path / "resumed") / "checkpoint.pt").exists()
+    assert (partial_dir(tmp_path / "resumed") / "checkpoint.pt").exists()
     resumed = train(data, cfg, tmp_path / "resumed")
     for name, t in full.model.params.items():
         torch.testing.assert_close(resumed.model.params[name], t, rtol=0, atol=0, msg=name)
@@ -132,7 +133,7 @@ def test_non_finite_steps_are_skipped_then_stop(data, tmp_path, monkeypatch):
     monkeypatch.setattr(cls, "step", lambda self, m, s, k, d: StepOutput(orig(self, m, s, k, d).loss * math.inf, {}))
     with pytest.raises(EigsError, match="consecutive steps"):
         train(data, _cfg(method="3dgs", steps=60, max_bad_steps=5), tmp_path / "bad")
-    assert (partial_dir_of(tmp_path / "bad") / "checkpoint.pt").exists()
+    assert (partial_dir(tmp_path / "bad") / "checkpoint.pt").exists()
 
 
 def test_oracle_and_edi_methods_sample_what_they_should(data):

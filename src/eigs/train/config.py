@@ -15,7 +15,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from eigs.errors import EigsError
-from eigs.train.options import coerce, unknown_keys
+from eigs.train.options import coerce
+from eigs.util.options import unknown_keys
 
 
 @dataclass

@@ -57,11 +57,6 @@ class RunResult:
     skipped_steps: int
 
 
-def partial_dir_of(run_dir: str | Path) -> Path:
-    """The checkpoint folder of ``run_dir`` (:func:`eigs.artifacts.run.partial_dir`)."""
-    return run_folder.partial_dir(run_dir)
-
-
 def finite_grads(params: list[torch.Tensor]) -> bool:
     """Whether every gradient of ``params`` is finite (parameters without one count as finite)."""
     grads = [p.grad for p in params if p.grad is not None]
@@ -285,7 +280,7 @@ def fit(
     resumes only on byte-identical inputs (their digest is in it). ``stop_after``: leave after this many steps
     (checkpoint written, no outputs) — for tests of resumption."""
     run_dir = Path(run_dir)
-    ckpt = partial_dir_of(run_dir) / run_folder.CHECKPOINT
+    ckpt = run_folder.partial_dir(run_dir) / run_folder.CHECKPOINT
     tr.inputs_digest = files_digest(inputs) if inputs else None
     if ckpt.exists():
         tr.load_checkpoint(ckpt)
@@ -293,7 +288,7 @@ def fit(
     tr.before_steps()
     if not run_steps(tr, ckpt, run_dir, stop_after):
         write_run(tr, run_dir, inputs or {})
-        shutil.rmtree(partial_dir_of(run_dir), ignore_errors=True)
+        shutil.rmtree(run_folder.partial_dir(run_dir), ignore_errors=True)
     return RunResult(tr.model, tr.method, tr.rows, tr.wall, tr.skipped)  # type: ignore[attr-defined]
 
 

@@ -12,6 +12,7 @@ from collections.abc import Mapping
 from typing import Any, TypeVar
 
 from eigs.errors import EigsError
+from eigs.util.options import unknown_keys
 
 O = TypeVar("O")
 
@@ -45,13 +46,6 @@ def coerce(name: str, default: Any, value: Any, where: str) -> Any:
     if not isinstance(value, want) or isinstance(value, bool) != isinstance(default, bool):
         raise EigsError(where, f"option {name} must be {want.__name__}, got {value!r}")
     return value
-
-
-def unknown_keys(values: Mapping[str, Any], keys: list[str], where: str, what: str = "option") -> None:
-    """Raise :class:`EigsError` naming the keys of ``values`` not among ``keys``, and the accepted ones."""
-    unknown = sorted(set(values) - set(keys))
-    if unknown:
-        raise EigsError(where, f"unknown {what}(s) {', '.join(unknown)}; accepted: {', '.join(keys) or 'none'}")
 
 
 def parse_options(defaults: O, values: Mapping[str, Any], where: str) -> O:

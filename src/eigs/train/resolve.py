@@ -10,7 +10,8 @@ from typing import Any
 from eigs.errors import EigsError
 from eigs.train.catalog import method
 from eigs.train.config import TrainConfig
-from eigs.train.options import Options, unknown_keys
+from eigs.train.options import Options
+from eigs.util.options import unknown_keys
 
 RUN_KEYS = ["method", "bins", "options", "scenes"]  # the keys of a `runs:` entry (workflow/schemas)
 

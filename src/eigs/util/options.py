@@ -28,12 +28,16 @@ def parse_config_json(text: str | None, option: str = "--config") -> dict[str, A
     return value
 
 
+def unknown_keys(values: Mapping[Any, Any], keys: list[str], where: str, what: str = "option") -> None:
+    """Raise :class:`EigsError` naming the keys of ``values`` not among ``keys``, and the accepted ones."""
+    unknown = sorted(map(str, set(values) - set(keys)))
+    if unknown:
+        raise EigsError(where, f"unknown {what}(s) {', '.join(unknown)}; accepted: {', '.join(keys) or 'none'}")
+
+
 def merge(keys: Iterable[str], section: Mapping[str, Any], given: Mapping[str, Any], option: str = "--config"):
     """``section`` (checked against ``keys``) updated by the entries of ``given`` that are not None."""
-    keys = set(keys)
-    unknown = sorted(set(section) - keys)
-    if unknown:
-        raise EigsError(option, f"unknown option(s) {', '.join(unknown)}; known: {', '.join(sorted(keys))}")
+    unknown_keys(section, sorted(set(keys)), option)
     return {**section, **{k: v for k, v in given.items() if v is not None}}
 
 
@@ -44,10 +48,7 @@ def check_section(where: str, values: Any, keys: Iterable[str], choices: Mapping
         return
     if not isinstance(values, Mapping):
         raise EigsError(where, f"expected a mapping of option → value, got {values!r}")
-    keys = list(keys)
-    unknown = sorted(set(values) - set(keys))
-    if unknown:
-        raise EigsError(where, f"unknown option(s) {', '.join(map(str, unknown))}; accepted: {', '.join(keys)}")
+    unknown_keys(values, list(keys), where)
     for key, accepted in choices.items():
         accepted = tuple(accepted)
         if key in values and values[key] not in accepted:

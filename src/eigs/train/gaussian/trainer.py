@@ -26,12 +26,12 @@ from eigs.train.data import HeldOut, TrainData
 from eigs.train.gaussian.methods import Method
 from eigs.train.gaussian.model import PARAM_NAMES, GaussianModel, make_optimizer, means_lr, scene_extent
 from eigs.train.gaussian.strategy import DensifyStrategy
-from eigs.train.loop import RunResult, RunTrainer, fit, partial_dir_of, psnr_by_kind
+from eigs.train.loop import RunResult, RunTrainer, fit, psnr_by_kind
 from eigs.train.options import Options
 
 log = logging.getLogger(__name__)
 
-__all__ = ["LOG_COLUMNS", "RunResult", "Trainer", "held_out_psnr", "partial_dir_of", "run_motion", "train"]
+__all__ = ["LOG_COLUMNS", "RunResult", "Trainer", "held_out_psnr", "run_motion", "train"]
 
 ADAM_STATE = ("step", "exp_avg", "exp_avg_sq")  # what torch.optim.Adam keeps per parameter (amsgrad off)
 LOG_COLUMNS = ("step", "wall_s", "loss", "n_gaussians", "psnr_novel", "psnr_blur")
