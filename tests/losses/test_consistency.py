@@ -61,9 +61,7 @@ def test_matches_dense_least_squares_with_noise_and_outliers():
     assert torch.isfinite(loss) and loss > 0
 
 
-@pytest.mark.parametrize(
-    "case", ["one", "collinear", "coplanar", "zero-displacement", "huge-coordinates", "empty"]
-)
+@pytest.mark.parametrize("case", ["one", "collinear", "coplanar", "zero-displacement", "huge-coordinates", "empty"])
 def test_degenerate_inputs_stay_finite(case):
     x, omega, nu, _ = _field(50)
     if case == "one":
@@ -105,3 +103,22 @@ def test_gradient_through_the_fit_is_optional_and_tested_against_finite_differen
             ref = torch.autograd.grad(torch.nn.functional.huber_loss(dx, fixed, reduction="sum", delta=0.1) / 30, dx)[0]
             got = torch.autograd.grad(f(dx), dx)[0]
             torch.testing.assert_close(got, ref)
+
+
+def test_a_stack_of_fields_is_fitted_each_against_its_own_twist():
+    """K fields at the same points in one call (the normal matrix shared): each recovers its own closed-form twist,
+    and the loss is the mean of the K single-field losses (float64)."""
+    x, _, _, g = _field(400, seed=3)
+    twists = [(torch.randn(3, generator=g, dtype=F64) * 0.02, torch.randn(3, generator=g, dtype=F64) * 0.1)
+              for _ in range(4)]  # fmt: skip
+    fields = torch.stack([rigid_displacement(x, w, v) for w, v in twists])  # (K, N, 3)
+    w, v = fit_twist(x, fields, reg=0.0)
+    assert w.shape == v.shape == (4, 3)
+    for k, (wk, vk) in enumerate(twists):
+        assert torch.allclose(w[k], wk, atol=1e-12, rtol=0) and torch.allclose(v[k], vk, atol=1e-12, rtol=0)
+    torch.testing.assert_close(rigid_displacement(x, w, v), fields, atol=1e-12, rtol=0)
+    noisy = fields + 0.05 * torch.randn(fields.shape, generator=g, dtype=F64)
+    one_by_one = torch.stack([motion_consistency_loss(x, noisy[k], delta=0.02) for k in range(4)]).mean()
+    assert one_by_one > 1e-4
+    torch.testing.assert_close(motion_consistency_loss(x, noisy, delta=0.02), one_by_one, atol=0, rtol=1e-12)
+    assert fit_twist(x[:0], noisy[:, :0])[0].shape == (4, 3)  # no Gaussians: zero twists, one per field

@@ -49,6 +49,33 @@ def test_zero_when_renders_differ_by_exactly_c_times_the_counts():
     assert event_integration_loss(log_a, log_b2, counts, cp, cn, mask) < 1e-12
 
 
+def test_a_stack_of_intervals_is_the_mean_of_their_losses():
+    """K intervals in one call (per-pixel thresholds and mask shared) equal the mean of the K single calls; with one
+    pixel of one interval off by 3 events and nothing else wrong, the stack's loss is 3 / (K · unmasked pixels)."""
+    rng = np.random.default_rng(4)
+    logs = torch.from_numpy(rng.normal(-1, 0.3, (5, 6, 7)))  # L = 5 latent log images
+    counts = torch.from_numpy(rng.integers(-4, 5, (4, 6, 7))).to(torch.int32)  # the K = 4 intervals' net counts
+    cp = torch.from_numpy(rng.uniform(0.15, 0.3, (6, 7)))
+    cn = torch.from_numpy(rng.uniform(0.15, 0.3, (6, 7)))
+    mask = torch.from_numpy(rng.random((6, 7)) < 0.2)
+    for dz, mm in ((0.0, 0.0), (0.3, 0.05)):
+        each = [event_integration_loss(logs[k], logs[k + 1], counts[k], cp, cn, mask, dz, mm) for k in range(4)]
+        stacked = event_integration_loss(logs[:-1], logs[1:], counts, cp, cn, mask, dz, mm)
+        torch.testing.assert_close(stacked, torch.stack(each).mean(), rtol=1e-14, atol=0)
+    exact = [logs[0]]
+    for k in range(4):
+        e = counts[k].to(torch.float64)
+        exact.append(exact[-1] + torch.where(e >= 0, cp * e, cn * e))
+    exact = torch.stack(exact)
+    assert event_integration_loss(exact[:-1], exact[1:], counts, cp, cn, mask) < 1e-12
+    i, j = map(int, (~mask).nonzero()[0])
+    off = counts.clone()
+    off[2, i, j] += 3
+    expected = 3 / (4 * int((~mask).sum()))
+    torch.testing.assert_close(event_integration_loss(exact[:-1], exact[1:], off, cp, cn, mask),
+                               torch.tensor(expected, dtype=torch.float64), rtol=1e-12, atol=0)  # fmt: skip
+
+
 def test_log_intensity_model_and_its_gradient_stay_finite_at_zero():
     img = torch.zeros(3, 4, 3, dtype=torch.float64, requires_grad=True)
     out = log_intensity(img, "srgb")

@@ -53,6 +53,21 @@ def test_moving_the_gaussians_by_the_inverse_equals_moving_the_camera():
     torch.testing.assert_close(moved, direct, atol=1e-9, rtol=0)
 
 
+def test_a_stack_of_transforms_moves_the_gaussians_as_each_transform_alone():
+    g = torch.Generator().manual_seed(2)
+    means = torch.randn(50, 3, generator=g, dtype=torch.float64)
+    quats = torch.randn(50, 4, generator=g, dtype=torch.float64)
+    stack = torch.stack([_random_rigid(g) for _ in range(3)])  # (K, 4, 4)
+    moved, rotated = transform_gaussians(means, quats, stack)
+    assert moved.shape == (3, 50, 3) and rotated.shape == (3, 50, 4)
+    for k in range(3):
+        m, q = transform_gaussians(means, quats, stack[k])
+        torch.testing.assert_close(moved[k], m, atol=1e-14, rtol=0)
+        torch.testing.assert_close(rotated[k], q, atol=1e-14, rtol=0)
+        r, t = stack[k, :3, :3], stack[k, :3, 3]
+        torch.testing.assert_close(m, means @ r.T + t, atol=1e-14, rtol=0)  # R x + p, written out
+
+
 def test_quaternion_helpers():
     g = torch.Generator().manual_seed(1)
     q = torch.randn(100, 4, generator=g, dtype=torch.float64)

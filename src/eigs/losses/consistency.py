@@ -36,16 +36,21 @@ def _skew(v: Tensor) -> Tensor:
 
 def fit_twist(x: Tensor, dx: Tensor, reg: float = DEFAULT_REG) -> tuple[Tensor, Tensor]:
     """Best-fitting twist of displacements ``dx`` (N, 3) at points ``x`` (N, 3): (omega (3,), nu (3,)) in x's dtype.
+    With a stack of K displacement fields ``dx`` (K, N, 3) at the same points: (omega (K, 3), nu (K, 3)), one fit
+    each (the normal matrix depends on ``x`` only, so it is built and factorised once for all K).
 
     Minimises Σ‖−ω × x_j − ν − δx_j‖² + reg·N·‖ξ‖² (the regulariser scales with N so its strength does not depend on
     the number of Gaussians). Differentiable in ``dx`` (and ``x``); N = 0 returns zeros.
     """
-    if x.shape != dx.shape or x.dim() != 2 or x.shape[1] != 3:
-        raise ValueError(f"x and dx must both be (N, 3), got {tuple(x.shape)} and {tuple(dx.shape)}")
+    batched = dx.dim() == 3
+    if x.dim() != 2 or x.shape[1] != 3 or dx.shape[-2:] != x.shape or dx.dim() not in (2, 3):
+        raise ValueError(f"x must be (N, 3) and dx (N, 3) or (K, N, 3), got {tuple(x.shape)} and {tuple(dx.shape)}")
     n = x.shape[0]
     if n == 0:
-        return x.new_zeros(3), x.new_zeros(3)
+        return x.new_zeros(dx.shape[:-2] + (3,)), x.new_zeros(dx.shape[:-2] + (3,))
     xd, dd = x.to(torch.float64), dx.to(torch.float64)
+    if not batched:
+        dd = dd.unsqueeze(0)  # (K = 1, N, 3)
     c = xd.detach().mean(dim=0)
     s = ((xd.detach() - c) ** 2).sum(dim=1).mean().sqrt()
     if not bool(s > 1e-9 * (1.0 + c.abs().max())):  # all points (numerically) at one place: centre, no scaling
@@ -58,23 +63,40 @@ def fit_twist(x: Tensor, dx: Tensor, reg: float = DEFAULT_REG) -> tuple[Tensor, 
     ata[:3, 3:] = _skew(sx)
     ata[3:, :3] = -_skew(sx)
     ata[3:, 3:] = n * eye
-    atb = torch.cat([-torch.cross(xs, dd, dim=1).sum(dim=0), -dd.sum(dim=0)])
+    # Aᵀb per field: −Σ x × δx = −Σ [x]ₓ δx, written as one product over the Gaussians: (K, 3) and −Σ δx (K, 3)
+    cross_sum = torch.einsum("nij,knj->ki", _skew_rows(xs), dd)
+    atb = torch.cat([-cross_sum, -dd.sum(dim=1)], dim=1).T  # (6, K)
     # ξ = T ξ': ω = ω'/s, ν = ν' + c × ω'/s
     t = torch.zeros(6, 6, dtype=torch.float64, device=x.device)
     t[:3, :3] = eye / s
     t[3:, :3] = _skew(c) / s
     t[3:, 3:] = eye
     lhs = ata + (reg * n) * (t.T @ t)  # symmetric positive definite for reg > 0
-    sol, info = torch.linalg.solve_ex(lhs, atb)
+    sol, info = torch.linalg.solve_ex(lhs, atb)  # (6, K)
     if int(info) != 0 or not bool(torch.isfinite(sol).all()):
         # reg = 0 with degenerate points (one point, a line): the minimum-norm least-squares answer
-        sol = torch.linalg.lstsq(lhs, atb.unsqueeze(1), driver="gelsd").solution.squeeze(1)
-    xi = t @ sol
-    return xi[:3].to(x.dtype), xi[3:].to(x.dtype)
+        sol = torch.linalg.lstsq(lhs, atb, driver="gelsd").solution
+    xi = (t @ sol).T.to(x.dtype)  # (K, 6)
+    if not batched:
+        return xi[0, :3], xi[0, 3:]
+    return xi[:, :3], xi[:, 3:]
+
+
+def _skew_rows(v: Tensor) -> Tensor:
+    """(N, 3) → (N, 3, 3): the cross-product matrix of every row (skew(v_j) @ w = v_j × w)."""
+    z = torch.zeros_like(v[:, 0])
+    x, y, w = v.unbind(1)
+    return torch.stack([z, -w, y, w, z, -x, -y, x, z], dim=1).reshape(-1, 3, 3)
 
 
 def rigid_displacement(x: Tensor, omega: Tensor, nu: Tensor) -> Tensor:
-    """Eq. 3: −ω × x − ν for points ``x`` (N, 3)."""
+    """Eq. 3: −ω × x − ν for points ``x`` (N, 3) and one twist (ω, ν: (3,)) → (N, 3), or K twists ((K, 3)) →
+    (K, N, 3)."""
+    if omega.dim() == 2:
+        return (
+            -torch.cross(omega[:, None, :].expand(-1, x.shape[0], 3), x.expand(omega.shape[0], -1, 3), dim=2)
+            - nu[:, None, :]
+        )
     return -torch.cross(omega.expand_as(x), x, dim=1) - nu
 
 
@@ -86,12 +108,14 @@ def motion_consistency_loss(
     grad_through_fit: bool = True,
 ) -> Tensor:
     """Eq. 6: mean over Gaussians of the Huber loss (threshold ``delta``, summed over x, y, z) between ``dx``
-    (N, 3) and the displacement of the best-fitting twist. ``grad_through_fit``: whether gradients flow through ξ*
-    (for a squared loss both give the same gradient, since the residual is orthogonal to the rigid fits); ``x`` is
-    treated as a constant. N = 0 gives 0."""
+    (N, 3) and the displacement of the best-fitting twist; for a stack ``dx`` (K, N, 3) (the K moved latent times of
+    one view) the mean of the K fields' losses, each against its own fit. ``grad_through_fit``: whether gradients
+    flow through ξ* (for a squared loss both give the same gradient, since the residual is orthogonal to the rigid
+    fits); ``x`` is treated as a constant. N = 0 gives 0."""
     if x.shape[0] == 0:
         return dx.sum() * 0.0
     x = x.detach()
     omega, nu = fit_twist(x, dx if grad_through_fit else dx.detach(), reg)
     fitted = rigid_displacement(x, omega, nu)
-    return torch.nn.functional.huber_loss(dx, fitted, reduction="sum", delta=delta) / x.shape[0]
+    k = dx.shape[0] if dx.dim() == 3 else 1
+    return torch.nn.functional.huber_loss(dx, fitted, reduction="sum", delta=delta) / (x.shape[0] * k)

@@ -65,7 +65,9 @@ def event_integration_loss(
 
     ``log_a``, ``log_b``: (H, W) log intensities at the interval's start and end; ``counts``: (H, W) net signed
     counts; ``c_pos``/``c_neg``: thresholds (scalars or (H, W) maps) for rising/falling intensity; ``mask``:
-    (H, W) bool, True where events were ignored. Zero exactly when ``log_b − log_a = C·E`` everywhere.
+    (H, W) bool, True where events were ignored. Zero exactly when ``log_b − log_a = C·E`` everywhere. A stack of
+    K intervals ((K, H, W) logs and counts; thresholds and mask per pixel, shared) gives the mean of the K
+    intervals' losses.
 
     Sensor-noise-aware variant (beyond the paper; both 0 by default, the paper's loss): an error up to
     ``deadzone + mismatch·|E|`` events costs nothing, the excess is L1. ``deadzone`` (events) covers the count's
@@ -81,7 +83,7 @@ def event_integration_loss(
         err = torch.relu(err - (deadzone + mismatch * e.abs()))
     if mask is not None:
         keep = ~mask
-        n = keep.sum()
+        n = keep.sum() * (err.numel() // max(keep.numel(), 1))  # every interval of a stack has the same pixels
         return (err * keep).sum() / n.clamp_min(1)
     return err.mean()
 

@@ -42,8 +42,13 @@ def quat_multiply(a: Tensor, b: Tensor) -> Tensor:
 
 def transform_gaussians(means: Tensor, quats: Tensor, t: Tensor) -> tuple[Tensor, Tensor]:
     """Apply the rigid (4, 4) transform ``t`` to Gaussians: centres (N, 3) ↦ R x + p, rotations (N, 4) ↦ q_R ⊗ q
-    (the quaternions keep their norm)."""
-    r = t[:3, :3].to(means.dtype)
-    moved = means @ r.T + t[:3, 3].to(means.dtype)
+    (the quaternions keep their norm). With a stack ``t`` (K, 4, 4): every transform at once, (K, N, 3) centres and
+    (K, N, 4) rotations."""
+    r = t[..., :3, :3].to(means.dtype)
+    p = t[..., :3, 3].to(means.dtype)
     qr = rotmat_to_quat(r)
+    if t.dim() == 3:
+        moved = torch.matmul(means, r.transpose(1, 2)) + p[:, None, :]  # (K, N, 3)
+        return moved, quat_multiply(qr[:, None, :].expand(-1, quats.shape[0], 4), quats.expand(t.shape[0], -1, 4))
+    moved = means @ r.T + p
     return moved, quat_multiply(qr.expand_as(quats), quats)

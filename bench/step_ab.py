@@ -1,0 +1,148 @@
+"""Whole training steps of this tree against other git revisions, interleaved (issue 46, part 3).
+
+For each revision a throwaway checkout (``git worktree``) is made under ``--work``, and its rasterizer extension built
+once (it carries its own sources); then for ``--rounds`` rounds, every (revision, case) runs in a fresh child process
+(one after the other, the order alternating between rounds): the child loads a scene's artifacts with that
+checkout's package, resamples the init cloud to the case's Gaussian count, builds the run's trainer (no
+densification), takes ``--warm`` untimed steps and times ``--steps`` more (``Trainer.train_step``, wall time, the
+median). The section reports each case's median over the rounds and the ratio this tree / revision, per round
+and overall; both builds run on the same machine within minutes of each other, so the ratio is what to compare.
+
+Run (a quiet machine): ``.venv/bin/python bench/step_ab.py --against 357e960 --case
+results/toy:config/toy.yaml:eigs+:0 --case results/d346-chair:config/davis346.yaml:eigs+:6500 [--threads 2]
+[--rounds 5] [--out DIR]``; a case is ``RESULTS:CONFIG:RUN:GAUSSIANS`` (0: the init cloud as it is).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def child(args: argparse.Namespace) -> None:
+    """Time one case with the package on ``sys.path`` (the checkout under test): prints one JSON line."""
+    import numpy as np
+    import torch
+    import yaml
+
+    from eigs.artifacts.gaussians import GaussianCloud
+    from eigs.train.config import TrainConfig
+    from eigs.train.data import load_train_data
+
+    try:  # the trainer's module moved in 2026-11 (issue 47)
+        from eigs.train.gaussian.trainer import Trainer
+    except ImportError:
+        from eigs.train.loop import Trainer  # type: ignore[no-redef]
+    torch.set_num_threads(args.threads)
+    results, config, run, gaussians = args.case.split(":")
+    r, b = Path(results), Path(results) / "b4"
+    data = load_train_data(r / "scene.h5", b / "edi.h5", b / "sfm", b / "init.ply")
+    n = int(gaussians)
+    if n > 0:  # the same draw as bench/train.py's resized_cloud
+        c = data.init
+        rng = np.random.default_rng(0)
+        idx = rng.choice(len(c), n, replace=n > len(c))
+        jitter = rng.normal(0, 1e-3, (n, 3)).astype(np.float32)
+        data.init = GaussianCloud(c.means[idx] + jitter, c.f_dc[idx], c.f_rest[idx], c.opacity[idx],
+                                  c.log_scales[idx], c.quats[idx])  # fmt: skip
+    spec = yaml.safe_load(Path(config).read_text())["runs"][run]
+    opts = spec.get("options", {})
+    cfg = TrainConfig.from_dict({"method": spec["method"], "densify": False,
+                                 "method_options": opts.get("method_options", {})})  # fmt: skip
+    tr = Trainer(data, cfg, torch.device("cpu"))
+    tr.warm_up()
+    for _ in range(args.warm):
+        tr.train_step()
+    times = []
+    for _ in range(args.steps):
+        t = time.perf_counter()
+        tr.train_step()
+        times.append((time.perf_counter() - t) * 1e3)
+    print(json.dumps({"ms": statistics.median(times), "gaussians": len(tr.model), "width": data.width,
+                      "height": data.height}))  # fmt: skip
+
+
+def checkout(rev: str, work: Path) -> Path:
+    """A worktree of ``rev`` under ``work`` (made once), its extension built."""
+    path = work / f"rev-{rev}"
+    if not path.is_dir():
+        subprocess.run(["git", "worktree", "add", "--detach", "-f", str(path), rev], cwd=REPO, check=True,
+                       capture_output=True)  # fmt: skip
+    return path
+
+
+def run_child(src: Path, case: str, args: argparse.Namespace) -> dict:
+    env = {**os.environ, "PYTHONPATH": str(src), "OMP_WAIT_POLICY": "PASSIVE"}
+    cmd = [sys.executable, str(Path(__file__).resolve()), "--child", "--case", case, "--threads", str(args.threads),
+           "--steps", str(args.steps), "--warm", str(args.warm)]  # fmt: skip
+    proc = subprocess.run(cmd, env=env, capture_output=True, text=True, check=False, cwd=REPO)
+    if proc.returncode != 0:
+        raise SystemExit(f"{src}: {case} failed:\n{proc.stderr[-2000:]}")
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--against", nargs="+", default=["357e960"], help="git revisions to time against")
+    ap.add_argument("--case", action="append", help="RESULTS:CONFIG:RUN:GAUSSIANS (repeatable)")
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--steps", type=int, default=20, help="timed steps per child (the median is kept)")
+    ap.add_argument("--warm", type=int, default=5, help="untimed steps first")
+    ap.add_argument("--work", type=Path, default=Path("/tmp/eigs-step-ab"), help="where the worktrees go")
+    ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
+    from bench._report import add_out_argument, table, write_section
+
+    add_out_argument(ap)
+    args = ap.parse_args()
+    if args.child:
+        child(args)
+        return
+    cases = args.case or ["results/toy:config/toy.yaml:eigs+:0"]
+    args.work.mkdir(parents=True, exist_ok=True)
+    trees = {"this tree": REPO / "src", **{rev: checkout(rev, args.work) / "src" for rev in args.against}}
+    ms: dict[tuple[str, str], list[float]] = {}
+    meta: dict[str, dict] = {}
+    for rnd in range(args.rounds):
+        order = list(trees.items()) if rnd % 2 == 0 else list(reversed(trees.items()))
+        for case in cases:
+            for name, src in order:
+                res = run_child(src, case, args)
+                ms.setdefault((name, case), []).append(res["ms"])
+                meta[case] = res
+                print(f"round {rnd + 1} {case} {name}: {res['ms']:.1f} ms", flush=True)
+    rows = []
+    for case in cases:
+        _, config, run, _ = case.split(":")
+        m = meta[case]
+        ours = statistics.median(ms[("this tree", case)])
+        for rev in args.against:
+            theirs = statistics.median(ms[(rev, case)])
+            per_round = [a / b for a, b in zip(ms[("this tree", case)], ms[(rev, case)], strict=True)]
+            rows.append([f"`{run}` ({Path(case.split(':')[0]).name})", f"{m['width']}×{m['height']}",
+                         f"{m['gaussians']:,}", f"`{rev}`", f"{theirs:.1f}", f"{ours:.1f}", f"{ours / theirs:.2f}",
+                         f"{min(per_round):.2f}–{max(per_round):.2f}"])  # fmt: skip
+    cols = ["run", "image", "Gaussians", "against", "ms then", "ms now", "now / then", "per round"]
+    body = (
+        f"One training step (`Trainer.train_step`, no densification, {args.threads} threads), this tree against "
+        f"older revisions built from their own sources, interleaved: {args.rounds} rounds, each a fresh process per "
+        f"(revision, case) timing the median of {args.steps} steps after {args.warm} untimed ones; the table gives "
+        "the median over the rounds and the range of the per-round ratios (`bench/step_ab.py`).\n\n"
+        + table(cols, rows) + "\n"
+    )  # fmt: skip
+    write_section("step-ab", "Training step against older revisions (issue 46)", body,
+                  data={"cases": cases, "ms": {f"{k[0]}|{k[1]}": v for k, v in ms.items()}}, out=args.out)  # fmt: skip
+    print(body)
+
+
+if __name__ == "__main__":
+    sys.path.insert(0, str(REPO))
+    main()
