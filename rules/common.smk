@@ -95,6 +95,53 @@ def sfm_model_path(wildcards):
     return scene_sfm(wildcards.scene)["path"]
 
 
+# The SfM rule, one definition for the three ways a scene gets its poses (eigs.plan.sfm_rule picks one per scene), the
+# same stage and command; its three names differ in `eigs sfm --mode` and the inputs that mode reads (docs/sfm.md):
+# - sfm: COLMAP on the latent frames;
+# - sfm_given: built-in scenes with ground-truth poses allowed (SFM_GIVEN_SCENES), no COLMAP mapping (triangulation
+#   at the given poses for the initial points);
+# - sfm_model: scenes whose poses come from an existing COLMAP model (`sfm: {mode: model, path: DIR}`, globally or
+#   per scene; SFM_MODEL_SCENES), matched to the views by name; the model is an input, so a changed model reruns it.
+# Each name keeps its own shell command, so Snakemake records the same code for it as before.
+SFM_LATENTS = {
+    "scene": "results/{scene}/scene.h5",
+    "edi": "results/{scene}/b{bins}/edi.h5",
+    "latent": "results/{scene}/b{bins}/latent",
+}
+
+
+def define_sfm_rule(_name, _scenes, _model, _mode):
+    """Define the SfM rule `_name` for `_scenes` with the extra inputs `_model` and the `eigs sfm` flags `_mode` (a
+    function, not a loop: the shell command reads `_mode` when the job runs, so each rule needs its own binding)."""
+
+    rule:
+        name:
+            _name
+        input:
+            **SFM_LATENTS,
+            **_model,
+        output:
+            directory("results/{scene}/b{bins}/sfm"),
+        wildcard_constraints:
+            scene=names_regex(_scenes),
+            bins=r"\d+",
+        params:
+            config=sfm_config,
+        log:
+            "logs/sfm/{scene}_b{bins}.log",
+        benchmark:
+            "benchmarks/sfm/{scene}_b{bins}.tsv"
+        threads: threads_for("sfm")
+        resources:
+            mem_mb=6000,
+        conda:
+            "../workflow/envs/eigs.yaml"
+        shell:
+            "eigs sfm {input.scene} {input.edi} --latent-dir {input.latent} -o {output} --config {params.config} "
+            + _mode
+            + "--threads {threads} > {log} 2>&1"
+
+
 def init_config(wildcards):
     """The `init:` section for `eigs init --config` (defaults: eigs.init.options.InitOptions)."""
     return section_json("init")

@@ -1,87 +1,11 @@
 # Camera poses of every EDI latent frame (COLMAP or given poses) and the initial Gaussians.
 
 
-rule sfm:
-    input:
-        scene="results/{scene}/scene.h5",
-        edi="results/{scene}/b{bins}/edi.h5",
-        latent="results/{scene}/b{bins}/latent",
-    output:
-        directory("results/{scene}/b{bins}/sfm"),
-    wildcard_constraints:
-        scene=names_regex(SFM_COLMAP_SCENES),
-        bins=r"\d+",
-    params:
-        config=sfm_config,
-    log:
-        "logs/sfm/{scene}_b{bins}.log",
-    benchmark:
-        "benchmarks/sfm/{scene}_b{bins}.tsv"
-    threads: threads_for("sfm")
-    resources:
-        mem_mb=6000,
-    conda:
-        "../workflow/envs/eigs.yaml"
-    shell:
-        "eigs sfm {input.scene} {input.edi} --latent-dir {input.latent} -o {output} --config {params.config} "
-        "--threads {threads} > {log} 2>&1"
-
-
-# Built-in scenes with ground-truth poses allowed (common.smk SFM_GIVEN_SCENES): the same stage in given mode, no
-# COLMAP mapping (triangulation at the given poses for the initial points; docs/sfm.md).
-rule sfm_given:
-    input:
-        scene="results/{scene}/scene.h5",
-        edi="results/{scene}/b{bins}/edi.h5",
-        latent="results/{scene}/b{bins}/latent",
-    output:
-        directory("results/{scene}/b{bins}/sfm"),
-    wildcard_constraints:
-        scene=names_regex(SFM_GIVEN_SCENES),
-        bins=r"\d+",
-    params:
-        config=sfm_config,
-    log:
-        "logs/sfm/{scene}_b{bins}.log",
-    benchmark:
-        "benchmarks/sfm/{scene}_b{bins}.tsv"
-    threads: threads_for("sfm")
-    resources:
-        mem_mb=6000,
-    conda:
-        "../workflow/envs/eigs.yaml"
-    shell:
-        "eigs sfm {input.scene} {input.edi} --latent-dir {input.latent} -o {output} --config {params.config} "
-        "--mode given --threads {threads} > {log} 2>&1"
-
-
-# Scenes whose poses come from an existing COLMAP model (`sfm: {mode: model, path: DIR}`, globally or per scene;
-# common.smk SFM_MODEL_SCENES): no COLMAP mapping; the model's poses, matched to the views by name (docs/sfm.md).
-rule sfm_model:
-    input:
-        scene="results/{scene}/scene.h5",
-        edi="results/{scene}/b{bins}/edi.h5",
-        latent="results/{scene}/b{bins}/latent",
-        model=sfm_model_path,
-    output:
-        directory("results/{scene}/b{bins}/sfm"),
-    wildcard_constraints:
-        scene=names_regex(SFM_MODEL_SCENES),
-        bins=r"\d+",
-    params:
-        config=sfm_config,
-    log:
-        "logs/sfm/{scene}_b{bins}.log",
-    benchmark:
-        "benchmarks/sfm/{scene}_b{bins}.tsv"
-    threads: threads_for("sfm")
-    resources:
-        mem_mb=6000,
-    conda:
-        "../workflow/envs/eigs.yaml"
-    shell:
-        "eigs sfm {input.scene} {input.edi} --latent-dir {input.latent} -o {output} --config {params.config} "
-        "--mode model --model {input.model} --threads {threads} > {log} 2>&1"
+# One rule definition for the three ways a scene gets its poses (common.smk define_sfm_rule; eigs.plan.sfm_rule picks
+# one per scene): sfm (COLMAP), sfm_given (ground-truth poses of a built-in scene), sfm_model (an existing COLMAP model)
+define_sfm_rule("sfm", SFM_COLMAP_SCENES, {}, "")
+define_sfm_rule("sfm_given", SFM_GIVEN_SCENES, {}, "--mode given ")
+define_sfm_rule("sfm_model", SFM_MODEL_SCENES, {"model": sfm_model_path}, "--mode model --model {input.model} ")
 
 
 rule init:

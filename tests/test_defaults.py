@@ -17,33 +17,31 @@ import pytest
 import yaml
 
 from eigs.edi import cli as edi_cli
-from eigs.edi.options import CONFIG_KEYS as EDI_KEYS
 from eigs.edi.options import EdiOptions
+from eigs.evaluate.options import EvaluateOptions
 from eigs.init import cli as init_cli
-from eigs.init.options import INIT_CONFIG_KEYS, InitOptions
+from eigs.init.options import InitOptions
 from eigs.sfm import cli as sfm_cli
-from eigs.sfm.options import SFM_CONFIG_KEYS, ColmapOptions, SfmConfig, sfm_config
+from eigs.sfm.options import ColmapOptions, SfmConfig
+from eigs.util.options import accepted, choices
 
 REPO = Path(__file__).resolve().parents[1]
 SCHEMA = yaml.safe_load((REPO / "workflow" / "schemas" / "config.schema.yaml").read_text())
-STAGES = {"edi": EDI_KEYS, "sfm": SFM_CONFIG_KEYS, "init": INIT_CONFIG_KEYS}
+# each config section and its options dataclass (the section's keys are its config keys: eigs.util.options.accepted)
+STAGES = {"edi": EdiOptions, "sfm": SfmConfig, "init": InitOptions, "evaluate": EvaluateOptions}
 
 
 def _defaults(section: str) -> dict:
     """The dataclass defaults of a section's keys, flattened like the config section."""
-    if section == "edi":
-        d = dataclasses.asdict(EdiOptions())
-    elif section == "sfm":
-        d = {**dataclasses.asdict(SfmConfig()), **dataclasses.asdict(ColmapOptions())}
-    else:
-        d = dataclasses.asdict(InitOptions())
-    return {k: d[k] for k in STAGES[section]}
+    d = dataclasses.asdict(STAGES[section]())
+    d.update(d.pop("colmap", {}))
+    return {k: d[k] for k in accepted(STAGES[section])}
 
 
 @pytest.mark.parametrize("section", sorted(STAGES))
 def test_schema_keys_are_the_options_and_carry_no_defaults(section):
     props = SCHEMA["properties"][section]["properties"]
-    assert set(props) == set(STAGES[section])
+    assert set(props) == set(accepted(STAGES[section]))
     assert {k: p["default"] for k, p in props.items() if "default" in p} == {}, "defaults live in the dataclass"
 
 
@@ -88,8 +86,12 @@ def test_unknown_or_malformed_config_is_a_clear_error():
         edi_cli.options(_parse(edi_cli, ["s", "-o", "e", "--config", '{"mask_topp": 0.1}']))
     with pytest.raises(EigsError, match="not valid JSON"):
         init_cli.options(_parse(init_cli, ["d", "-o", "i", "--config", "{random: 5}"]))
-    with pytest.raises(EigsError, match="unknown sfm option"):
-        sfm_config({"matchr": "auto"})
+    with pytest.raises(EigsError, match="unknown option.*matchr"):
+        SfmConfig.from_dict({"matchr": "auto"})
+    with pytest.raises(EigsError, match="--config: matcher.*'vocab' is not one of auto, exhaustive, sequential"):
+        sfm_cli.options(_parse(sfm_cli, ["s", "e", "-o", "o", "--config", '{"matcher": "vocab"}']))
+    with pytest.raises(EigsError, match="option mask_top must be float"):
+        edi_cli.options(_parse(edi_cli, ["s", "-o", "e", "--config", '{"mask_top": "lots"}']))
 
 
 def test_rules_pass_the_config_section_unchanged(tmp_path):
@@ -124,14 +126,10 @@ def test_rules_pass_the_config_section_unchanged(tmp_path):
 
 
 def test_schema_enums_are_the_codes():
-    """Every enum of a stage section in the schema is the tuple the code accepts (``CHOICES`` of the options module,
-    what eigs.plan.check_sections checks; the schema repeats it for `snakemake --lint` and editors, and this test
-    fails when the two drift)."""
-    from eigs.edi.options import CHOICES as EDI_CHOICES
-    from eigs.sfm.options import CHOICES as SFM_CHOICES
-
-    code = {**{("edi", k): tuple(v) for k, v in EDI_CHOICES.items()},
-            **{("sfm", k): tuple(v) for k, v in SFM_CHOICES.items()}}  # fmt: skip
+    """Every enum of a stage section in the schema is the tuple the code accepts (the ``choice`` fields of the options
+    dataclass, what its validator checks for the CLI and eigs.plan.check_sections; the schema repeats it for
+    `snakemake --lint` and editors, and this test fails when the two drift)."""
+    code = {(section, k): tuple(v) for section, cls in STAGES.items() for k, v in choices(cls).items()}
     schema = {(section, key): tuple(spec["enum"]) for section in STAGES
               for key, spec in SCHEMA["properties"][section]["properties"].items() if "enum" in spec}  # fmt: skip
     assert schema == code

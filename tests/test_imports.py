@@ -43,7 +43,7 @@ LAYERS = [
 # Modules that import no torch, in a fresh interpreter: the method catalog, every options module, the run
 # resolver, the planner (the workflow imports it while Snakemake plans) and the tables' rows.
 TORCH_FREE = [
-    "eigs.train.catalog", "eigs.train.resolve", "eigs.train.options", "eigs.train.config",
+    "eigs.train.catalog", "eigs.train.resolve", "eigs.util.options", "eigs.train.config",
     "eigs.train.gaussian.options", "eigs.train.field.options", "eigs.ingest.options", "eigs.edi.options",
     "eigs.sfm.options", "eigs.init.options", "eigs.plan", "eigs.tables.rows",
 ]  # fmt: skip

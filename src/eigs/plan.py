@@ -17,13 +17,11 @@ from dataclasses import dataclass
 from typing import Any
 
 from eigs.artifacts import run as run_folder
-from eigs.edi.options import CHOICES as EDI_CHOICES
-from eigs.edi.options import CONFIG_KEYS as EDI_KEYS
-from eigs.edi.options import DEFAULT_BINS
+from eigs.edi.options import DEFAULT_BINS, EdiOptions
+from eigs.evaluate.options import EvaluateOptions
 from eigs.ingest import FORMATS
-from eigs.init.options import INIT_CONFIG_KEYS
-from eigs.sfm.options import CHOICES as SFM_CHOICES
-from eigs.sfm.options import SFM_CONFIG_KEYS, SfmConfig
+from eigs.init.options import InitOptions
+from eigs.sfm.options import SfmConfig
 from eigs.train import catalog
 from eigs.util.options import check_section
 
@@ -193,16 +191,24 @@ def field_runs(config: Config) -> list[str]:
 
 
 def check_sections(config: Config) -> None:
-    """The stage sections (``edi:``, ``sfm:`` globally and per scene, ``init:``) checked against their options
-    dataclasses (:func:`eigs.util.options.check_section`: known keys, the values of the enum keys), before the
-    schema, so that a typo fails the dry run on one line naming the key and the accepted keys or values."""
-    check_section("config: edi", config.get("edi"), EDI_KEYS, EDI_CHOICES)
-    check_section("config: sfm", config.get("sfm"), SFM_CONFIG_KEYS, SFM_CHOICES)
-    check_section("config: init", config.get("init"), INIT_CONFIG_KEYS, {})
+    """The stage sections (``edi:``, ``sfm:`` globally and per scene, ``init:``, ``evaluate:``) through the validator
+    their CLIs use (``Options.from_dict`` of :mod:`eigs.util.options`: keys, types, accepted values, checks), before
+    the schema, so that a mistake fails the dry run on one line naming the key and the accepted keys or values. The
+    `edi:` section's ``bins`` is a list of B, each checked as the option ``bins``."""
+    edi = config.get("edi")
+    if isinstance(edi, Mapping):
+        bins = edi.get("bins", [])
+        for b in bins if isinstance(bins, list) else [bins]:
+            check_section("config: edi: bins", {"bins": b}, EdiOptions)
+        edi = {k: v for k, v in edi.items() if k != "bins"}
+    check_section("config: edi", edi, EdiOptions)
+    check_section("config: sfm", config.get("sfm"), SfmConfig)
+    check_section("config: init", config.get("init"), InitOptions)
+    check_section("config: evaluate", config.get("evaluate"), EvaluateOptions)
     scenes = config.get("scenes")
     for scene, spec in (scenes.items() if isinstance(scenes, Mapping) else ()):
         if isinstance(spec, Mapping):
-            check_section(f"config: scene {scene}: sfm", spec.get("sfm"), SFM_CONFIG_KEYS, SFM_CHOICES)
+            check_section(f"config: scene {scene}: sfm", spec.get("sfm"), SfmConfig)
 
 
 def check(config: Config) -> None:

@@ -51,7 +51,7 @@ def test_davis346_config_plans(tmp_path):
 
 def test_command_line_route_toy(tmp_path):
     from eigs.artifacts.edi import read_edi
-    from eigs.sfm.options import sfm_config
+    from eigs.sfm.options import SfmConfig
     from eigs.sfm.run import resolve_mode
 
     layout, gt, scene, edi = (tmp_path / n for n in ("e2nerf-real", "groundtruth.h5", "scene.h5", "b4/edi.h5"))
@@ -66,7 +66,7 @@ def test_command_line_route_toy(tmp_path):
     e = read_edi(edi)
     assert e.latent.shape == (4, 5, 48, 64, 3) and np.all(np.isfinite(e.latent))
     cfg = yaml.safe_load((REPO / "config/davis346.yaml").read_text())
-    assert resolve_mode(sfm_config(cfg["sfm"]), s, str(scene))[0] == "colmap"
+    assert resolve_mode(SfmConfig.from_dict(cfg["sfm"]), s, str(scene))[0] == "colmap"
 
 
 @pytest.mark.parametrize(

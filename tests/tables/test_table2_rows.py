@@ -12,8 +12,8 @@ import yaml
 
 from eigs.tables.rows import configured_rows
 from eigs.train.config import TrainConfig
-from eigs.train.options import options_json
 from eigs.train.resolve import method_options
+from eigs.util.options import options_json
 
 REPO = Path(__file__).resolve().parents[2]
 ABLATED = {"event_loss", "consistency"}  # the paper's Table II switches (L_event, L_consis); L_blur and ADE are on

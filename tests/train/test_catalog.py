@@ -19,8 +19,8 @@ from eigs.train import catalog
 from eigs.train.catalog import GAUSSIAN, METHODS, MethodSpec, method_class, register
 from eigs.train.gaussian.methods import Method
 from eigs.train.gaussian.options import MultiRenderOptions
-from eigs.train.options import Options, options_json
 from eigs.train.resolve import check_run, check_runs, method_options, train_config
+from eigs.util.options import Options, options_json
 
 REPO = Path(__file__).resolve().parents[2]
 TRAIN = REPO / "src" / "eigs" / "train"
@@ -95,7 +95,7 @@ def test_a_new_method_is_one_entry_and_one_class(tmp_path, monkeypatch, capsys):
         textwrap.dedent("""
         from dataclasses import dataclass
         from eigs.train.gaussian.methods import Method
-        from eigs.train.options import Options
+        from eigs.util.options import Options
 
         @dataclass(frozen=True)
         class ToyOptions(Options):

@@ -35,7 +35,7 @@ PACKAGE = {
         from dataclasses import dataclass
 
         from eigs.train.catalog import GAUSSIAN, MethodSpec
-        from eigs.train.options import Options
+        from eigs.util.options import Options
 
 
         @dataclass(frozen=True)

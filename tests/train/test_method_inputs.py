@@ -11,12 +11,12 @@ from unittest import mock
 import numpy as np
 import pytest
 
-from eigs.train.build import warn_without_events
 from eigs.train.catalog import METHODS, event_methods, method_class
 from eigs.train.field.methods import ImageField
 from eigs.train.gaussian.camera_motion import TrajectoryMethod
 from eigs.train.gaussian.deblur import MultiRender
 from eigs.train.gaussian.methods import ImageMethod
+from eigs.train.resolve import warn_without_events
 
 
 def reads_events_by_code(name: str) -> bool:

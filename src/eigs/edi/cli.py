@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import argparse
 
-from eigs.edi.options import CONFIG_KEYS, DEFAULT_BINS, MODES, SCOPES, EdiOptions
+from eigs.edi.options import DEFAULT_BINS, MODES, SCOPES, EdiOptions
 
 HELP = "EDI latent sharp frames from blurry frames and events (B + 1 per view), with their event integrals"
 _D = EdiOptions()
@@ -64,10 +64,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def options(args: argparse.Namespace) -> EdiOptions:
-    """:class:`EdiOptions` from the defaults, ``--config`` and the flags given (in that order)."""
-    from eigs.util.options import flags, merge, parse_config_json
+    """:class:`EdiOptions` from the defaults, ``--config`` and the flags given (in that order), checked."""
+    from eigs.util.options import accepted, flags, from_command_line
 
-    return EdiOptions(**merge(CONFIG_KEYS, parse_config_json(args.config), flags(args, CONFIG_KEYS)))
+    return from_command_line(EdiOptions, args.config, flags(args, accepted(EdiOptions)))
 
 
 def run(args: argparse.Namespace) -> int:

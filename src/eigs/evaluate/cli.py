@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from eigs.evaluate.options import EvaluateOptions
+
 HELP = "evaluate a trained run: PSNR/SSIM/LPIPS at the test cameras, or BRISQUE without ground truth; FPS, size"
 
 
@@ -17,7 +19,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("sfm", help="SfM output directory (poses.h5, test_cameras.h5)")
     p.add_argument("-o", "--output", required=True, help="metrics.json to write")
     p.add_argument("--path-frames", type=int, default=None, help="render-path frames (ellipse or orbit) scored on "
-                   "scenes without ground truth (default 120)")  # fmt: skip
+                   f"scenes without ground truth (default {EvaluateOptions.path_frames})")  # fmt: skip
     p.add_argument("--hidden-ground-truth", action="store_true", help="the scene is a recording through the "
                    "real-data path whose ground truth was kept aside for scoring (ingested with --groundtruth): "
                    "score BRISQUE (training views, path) as well as the test cameras")  # fmt: skip
@@ -28,14 +30,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import logging
 
-    from eigs.errors import EigsError
-    from eigs.evaluate.core import DEFAULT_PATH_FRAMES, evaluate_run
+    from eigs.evaluate.core import evaluate_run
+    from eigs.util.options import accepted, flags, from_command_line
 
-    frames = DEFAULT_PATH_FRAMES if args.path_frames is None else args.path_frames
-    if frames < 0:
-        raise EigsError("--path-frames", "must be >= 0")
+    opts = from_command_line(EvaluateOptions, None, flags(args, accepted(EvaluateOptions)), "eigs evaluate")
     res = evaluate_run(args.run, args.scene, args.sfm, args.output, resources=args.resources,
-                       path_frames=frames, device=args.device,
+                       path_frames=opts.path_frames, device=args.device,
                        hidden_ground_truth=args.hidden_ground_truth)  # fmt: skip
     m = res["metrics"]
     summary = ", ".join(

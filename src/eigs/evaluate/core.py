@@ -33,6 +33,7 @@ import numpy as np
 
 from eigs.artifacts import run as run_folder
 from eigs.errors import EigsError
+from eigs.evaluate.options import EvaluateOptions
 
 log = logging.getLogger("eigs.evaluate")
 
@@ -40,7 +41,6 @@ SSIM_TABLE_MODE = "3dgs"  # the lineage the tables show (docs/metrics.md)
 LPIPS_NET = "alex"
 SHARPNESS = "sharpness"  # the high-frequency power ratio (eigs.metrics.sharpness.hf_ratio)
 KIND_NAMES = {0: "blur", 1: "novel"}
-DEFAULT_PATH_FRAMES = 120  # E²NeRF's real protocol: 120 path renders beside the blur views
 
 
 def read_run_config(run_dir: Path) -> dict[str, Any]:
@@ -106,7 +106,7 @@ def evaluate_run(
     output: str | Path,
     *,
     resources: str | None = None,
-    path_frames: int = DEFAULT_PATH_FRAMES,
+    path_frames: int = EvaluateOptions.path_frames,
     device: str = "auto",
     hidden_ground_truth: bool = False,
 ) -> dict[str, Any]:

@@ -9,15 +9,17 @@ from pathlib import Path
 import numpy as np
 
 from eigs.errors import EigsError
+from eigs.util.options import Options
 
 KEEP_EVENTS = ("exposures", "all")
 TIME_UNITS = {"s": 1_000_000_000, "ms": 1_000_000, "us": 1_000, "ns": 1}  # nanoseconds per unit
 COMPRESSIONS = ("none", "gzip", "lzf")
 
 
-@dataclass
-class IngestOptions:
-    """Options shared by every format; None means "not given" (the format's default applies).
+@dataclass(frozen=True)
+class IngestOptions(Options):
+    """Options shared by every format; None means "not given" (the format's default applies). Checked when built
+    (:meth:`problems`, each naming its flag): the CLI builds them from its flags (``eigs.ingest.cli``).
 
     ``intrinsics``: ``FX,FY,CX,CY[,K1,K2,P1,P2[,K3]]`` or a file holding those numbers (OpenCV convention:
     pixel centres at integer coordinates). ``sensor_size``: (width, height) px. ``exposure_us``: (start, end) µs
@@ -40,31 +42,34 @@ class IngestOptions:
     time_offset_us: int | tuple | None = None  # t_event = t_frame + N, or ("auto", (lo, hi) | None) (eigs.ingest.sync)
     camera_response: str | None = None
     contrast_threshold: float | None = None
-    compression: str | None = None
+    compression: str | None = None  # "none" is stored as None
     columns: str | None = None  # numpy: column order of a plain (N, K) array, e.g. "t,x,y,p"
     topics: tuple[str, ...] | None = None  # rosbag: ROLE=TOPIC choices (roles: events, image, camera_info, exposure)
 
     def __post_init__(self) -> None:
-        if self.keep_events is not None and self.keep_events not in KEEP_EVENTS:
-            raise EigsError("--keep-events", f"must be one of {', '.join(KEEP_EVENTS)}, got {self.keep_events!r}")
-        if self.time_unit is not None and self.time_unit not in TIME_UNITS:
-            raise EigsError("--time-unit", f"must be one of {', '.join(TIME_UNITS)}, got {self.time_unit!r}")
         if self.compression == "none":
-            self.compression = None
+            object.__setattr__(self, "compression", None)
+        problems = self.problems()
+        if problems:
+            raise EigsError("ingest options", "; ".join(problems))
+
+    def problems(self) -> list[str]:
+        out = []
+        if self.keep_events is not None and self.keep_events not in KEEP_EVENTS:
+            out.append(f"--keep-events must be one of {', '.join(KEEP_EVENTS)}, got {self.keep_events!r}")
+        if self.time_unit is not None and self.time_unit not in TIME_UNITS:
+            out.append(f"--time-unit must be one of {', '.join(TIME_UNITS)}, got {self.time_unit!r}")
         if self.compression is not None and self.compression not in COMPRESSIONS:
-            raise EigsError("--compression", f"must be one of {', '.join(COMPRESSIONS)}, got {self.compression!r}")
+            out.append(f"--compression must be one of {', '.join(COMPRESSIONS)}, got {self.compression!r}")
         if self.exposure_us is not None and self.exposure_us[1] <= self.exposure_us[0]:
-            raise EigsError(
-                "--exposure-us", f"END must be after START, got {self.exposure_us[0]},{self.exposure_us[1]}"
-            )
+            out.append(f"--exposure-us END must be after START, got {self.exposure_us[0]},{self.exposure_us[1]}")
         if self.time_window is not None and self.time_window[1] <= self.time_window[0]:
-            raise EigsError(
-                "--time-window", f"END must be after START, got {self.time_window[0]},{self.time_window[1]}"
-            )
+            out.append(f"--time-window END must be after START, got {self.time_window[0]},{self.time_window[1]}")
         if self.contrast_threshold is not None and not (
             np.isfinite(self.contrast_threshold) and self.contrast_threshold > 0
         ):
-            raise EigsError("--contrast-threshold", f"must be a positive number, got {self.contrast_threshold}")
+            out.append(f"--contrast-threshold must be a positive number, got {self.contrast_threshold}")
+        return out
 
     def refuse(self, fmt: str, *names: str) -> None:
         """Raise when one of the options ``names`` (attribute names) was given to a format that has no use for it."""

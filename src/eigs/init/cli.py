@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import argparse
 
-from eigs.init.options import INIT_CONFIG_KEYS, InitOptions
+from eigs.init.options import InitOptions
 
 HELP = "initial Gaussians from the SfM points, written as a standard 3DGS PLY"
 _D = InitOptions()
@@ -34,10 +34,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def options(args: argparse.Namespace) -> InitOptions:
-    """:class:`InitOptions` from the defaults, ``--config`` and the flags given (in that order)."""
-    from eigs.util.options import flags, merge, parse_config_json
+    """:class:`InitOptions` from the defaults, ``--config`` and the flags given (in that order), checked."""
+    from eigs.util.options import accepted, flags, from_command_line
 
-    return InitOptions(**merge(INIT_CONFIG_KEYS, parse_config_json(args.config), flags(args, INIT_CONFIG_KEYS)))
+    return from_command_line(InitOptions, args.config, flags(args, accepted(InitOptions)))
 
 
 def run(args: argparse.Namespace) -> int:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import argparse
 
-from eigs.sfm.options import DEVICES, MATCHERS, MODES, SFM_CONFIG_KEYS, ColmapOptions, SfmConfig
+from eigs.sfm.options import DEVICES, MATCHERS, MODES, ColmapOptions, SfmConfig
 
 HELP = "camera poses of the EDI latent frames (COLMAP or given poses), test cameras and an accuracy report"
 _D, _C = SfmConfig(), ColmapOptions()
@@ -58,24 +58,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def options(args: argparse.Namespace) -> SfmConfig:
-    """:class:`SfmConfig` from the defaults, ``--config`` and the flags given (in that order)."""
+    """:class:`SfmConfig` from the defaults, ``--config`` and the flags given (in that order), checked; then the run
+    control (``--keep-work``, ``-v``, ``--no-plot``, ``--threads``)."""
     import os
+    from dataclasses import replace
 
-    from eigs.errors import EigsError
-    from eigs.sfm.options import sfm_config
-    from eigs.util.options import flags, merge, parse_config_json
+    from eigs.util.options import accepted, flags, from_command_line
 
-    values = merge(SFM_CONFIG_KEYS, parse_config_json(args.config), flags(args, SFM_CONFIG_KEYS))
-    cfg = sfm_config(
-        values,
-        keep_work=args.keep_work,
-        verbose=args.verbose,
-        plot=not args.no_plot,
-        num_threads=args.threads or min(2, os.cpu_count() or 1),
-    )
-    if not 0.0 <= cfg.min_registered_fraction <= 1.0:
-        raise EigsError(None, f"--min-registered-fraction must lie in [0, 1], got {cfg.min_registered_fraction}")
-    return cfg
+    cfg = from_command_line(SfmConfig, args.config, flags(args, accepted(SfmConfig)))
+    threads = args.threads or min(2, os.cpu_count() or 1)
+    return replace(cfg, keep_work=args.keep_work, verbose=args.verbose, plot=not args.no_plot,
+                   colmap=replace(cfg.colmap, num_threads=threads))  # fmt: skip
 
 
 def run(args: argparse.Namespace) -> int:

@@ -34,7 +34,7 @@ from eigs.errors import EigsError
 from eigs.train.config import TrainConfig
 from eigs.train.field.options import DeblurNerfOptions, E2NerfOptions, FieldOptions
 from eigs.train.gaussian.options import MultiRenderOptions, TrajectoryOptions
-from eigs.train.options import Options, parse_options
+from eigs.util.options import Options, parse_options
 
 GAUSSIAN = "gaussian"
 FIELD = "field"
@@ -87,10 +87,6 @@ class MethodSpec:
     def defaults(self) -> Options:
         """Its options with nothing set by a run: the options class's defaults with the recipe over them."""
         return parse_options(self.options(), self.recipe, f"method {self.name} recipe")
-
-    def parse(self, values: Mapping[str, Any], where: str | None = None) -> Options:
-        """A run's ``method_options`` over :meth:`defaults`, checked (unknown keys name the accepted ones)."""
-        return parse_options(self.defaults(), values, where or f"method {self.name}")
 
 
 METHODS: dict[str, MethodSpec] = {}

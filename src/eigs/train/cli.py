@@ -38,10 +38,10 @@ def run(args: argparse.Namespace) -> int:
 
     from eigs.errors import EigsError
     from eigs.train.catalog import FIELD, METHODS, trainer_class
-    from eigs.train.config import json_options
     from eigs.train.data import load_train_data
     from eigs.train.loop import fit
     from eigs.train.resolve import resolve_run
+    from eigs.util.options import parse_config_json
 
     if args.list:
         for name, spec in sorted(METHODS.items()):
@@ -52,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
     if missing:
         usage = "eigs train SCENE.h5 EDI.h5 SFM_DIR INIT.ply -o RUN_DIR"
         raise EigsError("eigs train", f"missing {', '.join(missing)}: {usage}")
-    cfg, options = resolve_run(json_options(args.config, "--config"), "--config", args.method, args.steps)
+    cfg, options = resolve_run(parse_config_json(args.config), "--config", args.method, args.steps)
     if args.device == "cuda" and not torch.cuda.is_available():
         raise EigsError("--device", "cuda requested but no CUDA device is available")
     device = torch.device("cuda" if args.device == "cuda" or (args.device == "auto" and torch.cuda.is_available())

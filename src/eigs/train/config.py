@@ -10,18 +10,18 @@ and ``prune_scale3d`` as fractions of the scene extent).
 from __future__ import annotations
 
 import dataclasses
-import json
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
-from eigs.errors import EigsError
-from eigs.train.options import coerce
-from eigs.util.options import unknown_keys
+from eigs.util.options import Options, parse_config_json
 
 
-@dataclass
-class TrainConfig:
-    """Every training hyperparameter, with its default. Method-specific options live in ``method_options``."""
+@dataclass(frozen=True)
+class TrainConfig(Options):
+    """Every training hyperparameter, with its default. A method's own options are ``method_options``, as the run
+    gives them (the method's options dataclass parses them once: :func:`eigs.train.resolve.resolve_run`)."""
+
+    kind: ClassVar[str] = "training option"
 
     method: str = "3dgs"
     steps: int = 3000
@@ -58,7 +58,7 @@ class TrainConfig:
     max_bad_steps: int = 20  # consecutive non-finite steps before the run stops
     method_options: dict[str, Any] = field(default_factory=dict)
 
-    def validate(self, where: str = "train config") -> None:
+    def problems(self) -> list[str]:
         checks = [
             (self.steps >= 1, "steps must be >= 1"),
             (self.schedule_steps >= 0, "schedule_steps must be >= 0 (0 = steps)"),
@@ -74,9 +74,7 @@ class TrainConfig:
         ]
         for name in ("lr_means", "lr_means_final", "lr_sh0", "lr_shN", "lr_opacities", "lr_scales", "lr_quats"):
             checks.append((getattr(self, name) >= 0, f"{name} must be >= 0"))
-        for ok, msg in checks:
-            if not ok:
-                raise EigsError(where, msg)
+        return [msg for ok, msg in checks if not ok]
 
     @property
     def horizon(self) -> int:
@@ -91,28 +89,6 @@ class TrainConfig:
         return dataclasses.asdict(self)
 
     @classmethod
-    def from_dict(cls, values: dict[str, Any], where: str = "train config") -> TrainConfig:
-        """Build from a (partial) mapping; unknown keys and wrong types raise :class:`EigsError` naming them."""
-        if not isinstance(values, dict):
-            raise EigsError(where, f"expected a mapping of options, got {type(values).__name__}")
-        unknown_keys(values, [f.name for f in dataclasses.fields(cls)], where, "training option")
-        defaults = cls()
-        kw = {name: coerce(name, getattr(defaults, name), value, where) for name, value in values.items()}
-        cfg = cls(**kw)
-        cfg.validate(where)
-        return cfg
-
-    @classmethod
     def from_json(cls, text: str, where: str = "train config") -> TrainConfig:
-        return cls.from_dict(json_options(text, where), where)
-
-
-def json_options(text: str, where: str = "train config") -> dict[str, Any]:
-    """The JSON object ``text`` (blank: ``{}``) as a dict; invalid JSON or another type raises :class:`EigsError`."""
-    try:
-        values = json.loads(text) if text.strip() else {}
-    except json.JSONDecodeError as err:
-        raise EigsError(where, f"not valid JSON ({err})") from None
-    if not isinstance(values, dict):
-        raise EigsError(where, f"expected a mapping of options, got {type(values).__name__}")
-    return values
+        """From a JSON object (blank: ``{}``): :func:`eigs.util.options.parse_config_json`, then :meth:`from_dict`."""
+        return cls.from_dict(parse_config_json(text, where), where)

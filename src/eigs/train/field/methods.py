@@ -30,7 +30,7 @@ from eigs.train.config import TrainConfig
 from eigs.train.data import TrainData
 from eigs.train.field.model import FieldModel
 from eigs.train.field.options import DeblurNerfOptions, E2NerfOptions, FieldOptions
-from eigs.train.options import Options, options_json
+from eigs.util.options import Options, options_json
 
 
 @dataclass

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from eigs.train.options import Options
+from eigs.util.options import Options
 
 
 @dataclass(frozen=True)

@@ -22,13 +22,13 @@ import torch
 from eigs.artifacts.field import FIELD_FILE, write_field
 from eigs.artifacts.gaussians import sh_dc_to_rgb
 from eigs.render.field import render_image
-from eigs.train.build import build_method
 from eigs.train.config import TrainConfig
 from eigs.train.data import TrainData
 from eigs.train.field.methods import FieldMethod
 from eigs.train.field.model import FieldModel, field_box, lr_factor, voxel_schedule
 from eigs.train.loop import RunResult, RunTrainer, fit, psnr_by_kind
-from eigs.train.options import Options
+from eigs.train.resolve import build_method
+from eigs.util.options import Options
 
 log = logging.getLogger(__name__)
 

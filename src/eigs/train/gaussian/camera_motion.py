@@ -37,7 +37,7 @@ from eigs.train.gaussian.model import GaussianModel
 from eigs.train.gaussian.options import TrajectoryOptions
 from eigs.train.gaussian.rigid import transform_gaussians
 from eigs.train.gaussian.trajectory import curve_weights, fit_controls, se3_exp, se3_log
-from eigs.train.options import Options
+from eigs.util.options import Options
 
 
 class TrajectoryMethod(Method):

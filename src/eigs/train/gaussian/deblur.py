@@ -33,7 +33,7 @@ from eigs.train.gaussian.methods import LatentMotion, Method, StepOutput
 from eigs.train.gaussian.model import GaussianModel
 from eigs.train.gaussian.options import MultiRenderOptions
 from eigs.train.gaussian.rigid import transform_gaussians
-from eigs.train.options import Options
+from eigs.util.options import Options
 
 
 def rigid_inverse(c2w: Tensor) -> Tensor:

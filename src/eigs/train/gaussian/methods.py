@@ -22,7 +22,7 @@ from eigs.train.catalog import method as method_spec
 from eigs.train.config import TrainConfig
 from eigs.train.data import TrainData
 from eigs.train.gaussian.model import GaussianModel
-from eigs.train.options import Options, options_json
+from eigs.util.options import Options, options_json
 
 
 @dataclass

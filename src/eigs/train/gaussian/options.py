@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from eigs.train.options import Options
+from eigs.util.options import Options
 
 PRECISIONS = ("auto", "float32", "bfloat16")  # the ADE's matmul dtypes (eigs.train.gaussian.ade.compute_dtype)
 MODES = ("linear", "cubic", "bezier")  # trajectory curves (eigs.train.gaussian.trajectory.curve_weights)

@@ -20,14 +20,14 @@ import torch
 from eigs.artifacts.gaussians import write_gaussian_ply
 from eigs.artifacts.motion import RunMotion, sample_indices, write_motion
 from eigs.artifacts.run import MODEL_PLY, MOTION
-from eigs.train.build import build_method
 from eigs.train.config import TrainConfig
 from eigs.train.data import HeldOut, TrainData
 from eigs.train.gaussian.methods import Method
 from eigs.train.gaussian.model import PARAM_NAMES, GaussianModel, make_optimizer, means_lr, scene_extent
 from eigs.train.gaussian.strategy import DensifyStrategy
 from eigs.train.loop import RunResult, RunTrainer, fit, psnr_by_kind
-from eigs.train.options import Options
+from eigs.train.resolve import build_method
+from eigs.util.options import Options
 
 log = logging.getLogger(__name__)
 
