@@ -42,7 +42,7 @@ def child(args: argparse.Namespace) -> None:
     except ImportError:
         from eigs.train.loop import Trainer  # type: ignore[no-redef]
     torch.set_num_threads(args.threads)
-    results, config, run, gaussians = args.case.split(":")
+    results, config, run, gaussians = args.case[0].split(":")
     r, b = Path(results), Path(results) / "b4"
     data = load_train_data(r / "scene.h5", b / "edi.h5", b / "sfm", b / "init.ply")
     n = int(gaussians)
