@@ -40,6 +40,12 @@ class TrainConfig(Options):
     lr_scales: float = 5e-3
     lr_quats: float = 1e-3
     lambda_dssim: float = 0.2
+    # camera refinement, Gaussian methods only (eigs.train.gaussian.camera_refine: a learned SE(3) correction per
+    # training view; its schedule and regulariser are BAD-Gaussians', docs/training.md "Camera refinement")
+    camera_refine: bool = False
+    lr_camera: float = 1e-3
+    lr_camera_final: float = 1e-6
+    camera_reg: float = 1e-6  # Adam weight decay on the twists
     # densification (3DGS / gsplat DefaultStrategy semantics; the paper's prune 1e-2, densify 5e-4)
     densify: bool = True
     refine_start: int = 300
@@ -72,7 +78,8 @@ class TrainConfig(Options):
             (self.max_bad_steps >= 1, "max_bad_steps must be >= 1"),
             (self.max_gaussians >= 1, "max_gaussians must be >= 1"),
         ]
-        for name in ("lr_means", "lr_means_final", "lr_sh0", "lr_shN", "lr_opacities", "lr_scales", "lr_quats"):
+        for name in ("lr_means", "lr_means_final", "lr_sh0", "lr_shN", "lr_opacities", "lr_scales", "lr_quats",
+                     "lr_camera", "lr_camera_final", "camera_reg"):  # fmt: skip
             checks.append((getattr(self, name) >= 0, f"{name} must be >= 0"))
         return [msg for ok, msg in checks if not ok]
 

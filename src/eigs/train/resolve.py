@@ -10,7 +10,7 @@ from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 from eigs.errors import EigsError
-from eigs.train.catalog import method, method_class
+from eigs.train.catalog import GAUSSIAN, method, method_class
 from eigs.train.config import TrainConfig
 from eigs.util.options import Options, parse_options, unknown_keys
 
@@ -38,6 +38,9 @@ def resolve_run(
     elif "steps" not in values:
         resolved["steps"] = spec.steps
     cfg = TrainConfig.from_dict(resolved, "command line" if method_name is not None or steps is not None else where)
+    if cfg.camera_refine and spec.family != GAUSSIAN:
+        raise EigsError(where, f"camera_refine: method {spec.name} is a {spec.family} method; camera refinement is for "
+                               f"the {GAUSSIAN} methods")  # fmt: skip
     return cfg, parse_options(spec.defaults(), cfg.method_options, f"{where}: method_options ({spec.name})")
 
 

@@ -123,17 +123,15 @@ class TrajectoryMethod(Method):
         return self.ref_f[v] @ se3_exp(-xi) @ self.ref_inv_f[v]
 
     def step(self, model: GaussianModel, sample: int, step: int, sh_degree: int) -> StepOutput:
-        d, o = self.data, self.o
+        o = self.o
         v = int(self.views[sample])
         p = model.params
         images, infos = [], []
         if o.sharp_one_render and bool(self.events.sharp[v]):  # no motion to model: one render, the frame as target
-            return self.photometric_step(model, self.ref[v], self.blurry[v], sh_degree)
+            return self.photometric_step(model, self.ref[v], self.blurry[v], sh_degree, v)
         for g in self.gaussian_motions(v):
             means, quats = transform_gaussians(p["means"], p["quats"], g)
-            img, _, info = model.render(self.ref[v], self.K, d.width, d.height, self.background, sh_degree,
-                                        means=means, quats=quats)  # fmt: skip
-            info["means2d"].retain_grad()
+            img, info = self.render_view(model, v, self.ref[v], sh_degree, means=means, quats=quats)
             images.append(img)
             infos.append(info)
         stack = torch.stack(images)  # (n_virtual, H, W, C)

@@ -124,12 +124,11 @@ class MultiRender(Method):
     ) -> tuple[list[Tensor], list[dict], Tensor | None, list[int]]:
         """Renders of view v in time order, their infos, the raw ADE displacements (N_G, N, 3) or None, and the
         positions of the N+1 latent renders in the list (every render is one with ``subframes = 1``)."""
-        d, o = self.data, self.o
+        o = self.o
         images, infos = [], []
 
         def render(c2w: Tensor, **moved: Tensor) -> None:
-            img, _, info = model.render(c2w, self.K, d.width, d.height, self.background, sh_degree, **moved)
-            info["means2d"].retain_grad()
+            img, info = self.render_view(model, v, c2w, sh_degree, **moved)
             images.append(img)
             infos.append(info)
 
@@ -224,7 +223,7 @@ class MultiRender(Method):
 
     def sharp_step(self, model: GaussianModel, v: int, sh_degree: int) -> StepOutput:
         """A view without motion (EDI marked it sharp): one render at its reference pose against the frame."""
-        return self.photometric_step(model, self.c2w[v, 0], self.blurry[v], sh_degree)
+        return self.photometric_step(model, self.c2w[v, 0], self.blurry[v], sh_degree, v)
 
     def step(self, model: GaussianModel, sample: int, step: int, sh_degree: int) -> StepOutput:
         o = self.o

@@ -22,6 +22,7 @@ from eigs.artifacts.motion import RunMotion, sample_indices, write_motion
 from eigs.artifacts.run import MODEL_PLY, MOTION
 from eigs.train.config import TrainConfig
 from eigs.train.data import HeldOut, TrainData
+from eigs.train.gaussian.camera_refine import CameraRefinement, camera_lr
 from eigs.train.gaussian.methods import Method
 from eigs.train.gaussian.model import PARAM_NAMES, GaussianModel, make_optimizer, means_lr, scene_extent
 from eigs.train.gaussian.strategy import DensifyStrategy
@@ -70,7 +71,7 @@ class Trainer(RunTrainer):
         self.extent = scene_extent(centres)
         self.method: Method = build_method(Method, data, cfg, device, options)
         self.optimizer = make_optimizer(self.model, cfg, self.extent)
-        for group in self.method.param_groups():
+        for group in self.method.all_param_groups():
             self.optimizer.add_param_group(group)
         self.strategy = DensifyStrategy(cfg, self.extent, data.width, data.height, seed=cfg.seed)
         self.rng = np.random.default_rng(cfg.seed)
@@ -83,6 +84,7 @@ class Trainer(RunTrainer):
             "optimizer": self.optimizer.state_dict(),
             "strategy": self.strategy.state_dict(),
             "method": self.method.state_dict(),
+            "camera": self.method.camera.state_dict() if self.method.camera is not None else None,
             "rng": self.rng.bit_generator.state,
             "order": [int(i) for i in self.order],
         }
@@ -125,6 +127,12 @@ class Trainer(RunTrainer):
         for group in opt.get("param_groups", []) if isinstance(opt.get("param_groups"), list) else []:
             if not isinstance(group, dict) or not _adam_hyperparameters_valid(group):
                 return f"optimizer hyperparameters of group {group.get('name') if isinstance(group, dict) else '?'}"
+        camera = state.get("camera")
+        if self.method.camera is not None and not (
+            isinstance(camera, dict) and isinstance(camera.get("xi"), torch.Tensor)
+            and camera["xi"].shape == self.method.camera.xi.shape and bool(torch.isfinite(camera["xi"]).all())
+        ):  # fmt: skip
+            return "camera corrections missing or damaged"
         missing = [k for k in ("strategy", "method", "rng", "order") if k not in state]
         return f"missing {', '.join(missing)}" if missing else super().state_problem(state)
 
@@ -132,9 +140,11 @@ class Trainer(RunTrainer):
         for name in PARAM_NAMES:
             self.model.params[name] = state["params"][name].to(self.device).requires_grad_(True)
         self.optimizer = make_optimizer(self.model, self.cfg, self.extent)
-        for group in self.method.param_groups():
+        for group in self.method.all_param_groups():
             self.optimizer.add_param_group(group)
         self.method.load_state_dict(state["method"])
+        if self.method.camera is not None:
+            self.method.camera.load_state_dict(state["camera"])
         self.optimizer.load_state_dict(state["optimizer"])
         self.strategy.load_state_dict(state["strategy"])
         self.rng.bit_generator.state = state["rng"]
@@ -159,6 +169,8 @@ class Trainer(RunTrainer):
         for group in self.optimizer.param_groups:
             if group.get("name") == "means":
                 group["lr"] = means_lr(cfg, self.extent, step)
+            elif group.get("name") == CameraRefinement.NAME:
+                group["lr"] = camera_lr(cfg.lr_camera, cfg.lr_camera_final, step, cfg.horizon)
         out = self.method.step(self.model, sample, step, self.sh_degree_at(step))
         return out.loss, out.terms, out.infos
 
