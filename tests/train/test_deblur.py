@@ -14,9 +14,9 @@ from eigs.losses import photometric_loss
 from eigs.losses.consistency import motion_consistency_loss
 from eigs.losses.events import event_integration_loss, log_intensity
 from eigs.render.gaussians import render_gaussians
+from eigs.render.rigid import quat_multiply, rotmat_to_quat, transform_gaussians
 from eigs.train.config import TrainConfig
 from eigs.train.data import load_train_data
-from eigs.train.gaussian.rigid import quat_multiply, rotmat_to_quat, transform_gaussians
 from eigs.train.gaussian.strategy import quat_to_rotmat
 from eigs.train.gaussian.trainer import Trainer
 

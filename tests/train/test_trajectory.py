@@ -12,11 +12,11 @@ import torch
 from eigs.errors import EigsError
 from eigs.losses.events import normalized_event_loss
 from eigs.render.gaussians import render_gaussians
+from eigs.render.rigid import se3_exp, se3_log, transform_gaussians
 from eigs.train.config import TrainConfig
 from eigs.train.data import load_train_data
-from eigs.train.gaussian.rigid import transform_gaussians
 from eigs.train.gaussian.trainer import Trainer
-from eigs.train.gaussian.trajectory import curve_weights, fit_controls, se3_exp, se3_log
+from eigs.train.gaussian.trajectory import curve_weights, fit_controls
 
 
 def _rodrigues(w: np.ndarray) -> np.ndarray:

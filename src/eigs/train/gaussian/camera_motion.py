@@ -29,14 +29,14 @@ from eigs.losses.events import (
     normalized_event_loss,
     to_linear,
 )
+from eigs.render.rigid import se3_exp, se3_log, transform_gaussians
 from eigs.train.config import TrainConfig
 from eigs.train.data import TrainData
 from eigs.train.event_inputs import EventInputs
 from eigs.train.gaussian.methods import LatentMotion, Method, StepOutput
 from eigs.train.gaussian.model import GaussianModel
 from eigs.train.gaussian.options import TrajectoryOptions
-from eigs.train.gaussian.rigid import transform_gaussians
-from eigs.train.gaussian.trajectory import curve_weights, fit_controls, se3_exp, se3_log
+from eigs.train.gaussian.trajectory import curve_weights, fit_controls
 from eigs.util.options import Options
 
 

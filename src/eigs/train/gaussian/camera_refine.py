@@ -4,7 +4,7 @@ View v's cameras become ``P_v · exp(ξ_v)`` for its reference camera ``P_v`` (l
 ``ξ_v = (ω, ν)`` (rotation vector in radians, then translation in scene units), zero at the start. Every render of
 the view moves together: the rasterizer has no pose gradients, so the view's Gaussians (after whatever the method
 moves them by: the ADE, a trajectory) are moved by ``W_v⁻¹`` with ``W_v = P_v · exp(ξ_v) · P_v⁻¹``, which renders
-exactly what cameras ``W_v · P`` see (:mod:`eigs.train.gaussian.rigid`): for the reference camera that is
+exactly what cameras ``W_v · P`` see (:mod:`eigs.render.rigid`): for the reference camera that is
 ``P_v · exp(ξ_v)``, and every latent camera of the view is moved by the same rigid ``W_v``.
 
 Schedule and regulariser from published practice: Adam on the twists with learning rate ``lr_camera`` decaying
@@ -21,8 +21,7 @@ import math
 import torch
 from torch import Tensor
 
-from eigs.train.gaussian.rigid import transform_gaussians
-from eigs.train.gaussian.trajectory import se3_exp
+from eigs.render.rigid import se3_exp, transform_gaussians
 
 
 def camera_lr(lr: float, lr_final: float, step: int, horizon: int) -> float:

@@ -25,6 +25,7 @@ from eigs.losses.events import (
     luma,
     to_linear,
 )
+from eigs.render.rigid import transform_gaussians
 from eigs.train.config import TrainConfig
 from eigs.train.data import TrainData
 from eigs.train.event_inputs import EventInputs
@@ -32,7 +33,6 @@ from eigs.train.gaussian.ade import ADE, compute_dtype
 from eigs.train.gaussian.methods import LatentMotion, Method, StepOutput
 from eigs.train.gaussian.model import GaussianModel
 from eigs.train.gaussian.options import MultiRenderOptions
-from eigs.train.gaussian.rigid import transform_gaussians
 from eigs.util.options import Options
 
 
