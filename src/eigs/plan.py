@@ -93,6 +93,8 @@ def evaluate_flags(config: Config, scene: str) -> list[str]:
     defaults), and ``--hidden-ground-truth`` for a simulated recording (BRISQUE beside the test cameras)."""
     e = config.get("evaluate") or {}
     out = ["--path-frames", str(int(e["path_frames"]))] if "path_frames" in e else []
+    if "test_pose_iters" in e:
+        out += ["--test-pose-iters", str(int(e["test_pose_iters"]))]
     if scene_hidden_ground_truth(config, scene):
         out.append("--hidden-ground-truth")
     return out

@@ -13,9 +13,10 @@ from eigs.errors import EigsError
 from eigs.render.gaussians import render_gaussians
 from eigs.train.config import TrainConfig
 from eigs.train.data import load_train_data
-from eigs.train.gaussian.camera_refine import CameraRefinement, camera_lr
+from eigs.train.gaussian.camera_refine import CameraRefinement
 from eigs.train.gaussian.trainer import Trainer, train
 from eigs.train.resolve import resolve_run
+from eigs.util.schedule import exp_decay
 
 F64 = torch.float64
 
@@ -113,7 +114,7 @@ def test_perturbed_cameras_move_back_toward_the_truth():
     assert rot0 > 2.0 and tr0 > 0.055
     for step in range(150):
         for group in opt.param_groups:
-            group["lr"] = camera_lr(1e-2, 1e-4, step, 150)
+            group["lr"] = exp_decay(1e-2, 1e-4, step, 150)
         opt.zero_grad()
         loss = sum((render_gaussians(*cam.move(v, means, quats), log_scales, opac, sh, start[v], K, 40, 30)[0]
                     - targets[v]).abs().mean() for v in range(3))  # fmt: skip
@@ -124,11 +125,11 @@ def test_perturbed_cameras_move_back_toward_the_truth():
 
 
 def test_the_schedule_decays_exponentially_between_its_ends():
-    assert camera_lr(1e-3, 1e-6, 0, 100) == pytest.approx(1e-3, rel=1e-12)
-    assert camera_lr(1e-3, 1e-6, 50, 100) == pytest.approx(math.sqrt(1e-3 * 1e-6), rel=1e-12)
-    assert camera_lr(1e-3, 1e-6, 100, 100) == pytest.approx(1e-6, rel=1e-12)
-    assert camera_lr(1e-3, 1e-6, 500, 100) == pytest.approx(1e-6, rel=1e-12)
-    assert camera_lr(1e-3, 0.0, 50, 100) == pytest.approx(5e-4, rel=1e-12)
+    assert exp_decay(1e-3, 1e-6, 0, 100) == pytest.approx(1e-3, rel=1e-12)
+    assert exp_decay(1e-3, 1e-6, 50, 100) == pytest.approx(math.sqrt(1e-3 * 1e-6), rel=1e-12)
+    assert exp_decay(1e-3, 1e-6, 100, 100) == pytest.approx(1e-6, rel=1e-12)
+    assert exp_decay(1e-3, 1e-6, 500, 100) == pytest.approx(1e-6, rel=1e-12)
+    assert exp_decay(1e-3, 0.0, 50, 100) == pytest.approx(5e-4, rel=1e-12)
 
 
 def test_the_switch_in_the_trainer(toy, tmp_path):
@@ -145,7 +146,7 @@ def test_the_switch_in_the_trainer(toy, tmp_path):
         assert groups["camera"]["params"][0] is tr.method.camera.xi
         for _ in range(3):
             assert tr.train_step()
-        assert groups["camera"]["lr"] == pytest.approx(camera_lr(cfg.lr_camera, cfg.lr_camera_final, 2, 40))
+        assert groups["camera"]["lr"] == pytest.approx(exp_decay(cfg.lr_camera, cfg.lr_camera_final, 2, 40))
         moved = tr.method.camera.xi.detach().abs().sum(dim=1) > 0
         assert moved.any() and torch.isfinite(tr.method.camera.xi).all()
     cfg = TrainConfig.from_dict({**base, "method": "3dgs"})

@@ -20,6 +20,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("-o", "--output", required=True, help="metrics.json to write")
     p.add_argument("--path-frames", type=int, default=None, help="render-path frames (ellipse or orbit) scored on "
                    f"scenes without ground truth (default {EvaluateOptions.path_frames})")  # fmt: skip
+    p.add_argument("--test-pose-iters", type=int, default=None, help="also score the second protocol: every test "
+                   "camera refined against its image on the frozen model for this many iterations (default "
+                   f"{EvaluateOptions.test_pose_iters}: off)")  # fmt: skip
     p.add_argument("--hidden-ground-truth", action="store_true", help="the scene is a recording through the "
                    "real-data path whose ground truth was kept aside for scoring (ingested with --groundtruth): "
                    "score BRISQUE (training views, path) as well as the test cameras")  # fmt: skip
@@ -35,7 +38,7 @@ def run(args: argparse.Namespace) -> int:
 
     opts = from_command_line(EvaluateOptions, None, flags(args, accepted(EvaluateOptions)), "eigs evaluate")
     res = evaluate_run(args.run, args.scene, args.sfm, args.output, resources=args.resources,
-                       path_frames=opts.path_frames, device=args.device,
+                       path_frames=opts.path_frames, device=args.device, test_pose_iters=opts.test_pose_iters,
                        hidden_ground_truth=args.hidden_ground_truth)  # fmt: skip
     m = res["metrics"]
     summary = ", ".join(

@@ -109,6 +109,7 @@ def evaluate_run(
     path_frames: int = EvaluateOptions.path_frames,
     device: str = "auto",
     hidden_ground_truth: bool = False,
+    test_pose_iters: int = EvaluateOptions.test_pose_iters,
 ) -> dict[str, Any]:
     """Evaluate ``run_dir``; write ``output`` (metrics.json), ``per_image.csv`` and ``renders/`` beside it.
 
@@ -118,6 +119,9 @@ def evaluate_run(
     ``hidden_ground_truth``: the scene is a recording through the real-data path whose ground truth was kept aside
     for scoring (``config/davis346.yaml``): both are scored, the test cameras and the BRISQUE sets, and the
     metrics say so (``hidden_ground_truth``).
+    ``test_pose_iters`` > 0: the second protocol as well (:mod:`eigs.evaluate.test_poses`): every test camera refined
+    against its image on the frozen model, scored into the groups ``novel_pose_opt`` and ``blur_pose_opt`` (renders
+    in ``renders/novel_pose_opt/`` …) beside today's, and the refinements' sizes under ``test_pose_opt``.
     """
     import torch
 
@@ -148,6 +152,10 @@ def evaluate_run(
     groups: dict[str, dict[str, Any]] = {}
     path_kind = ""
     times: list[float] = []
+    pose_opt: dict[str, Any] | None = None
+    if test_pose_iters > 0 and not isinstance(g, CloudTensors):
+        log.warning("test-pose refinement is for Gaussian models; %s is a field run: scored by today's protocol only",
+                    run_dir)  # fmt: skip
     renders_dir = output.parent / "renders"
     with atomic_path(renders_dir, directory=True) as tmp:
         if has_gt:
@@ -167,6 +175,9 @@ def evaluate_run(
                                  "camera": METHODS.get(int(tc.method[i]), "?"), **s})  # fmt: skip
                 if per:
                     groups[name] = group_means(name, per)
+            if test_pose_iters > 0 and isinstance(g, CloudTensors):
+                pose_opt = _score_refined_cameras(g, tc, scene, w, h, bg, test_pose_iters, tmp, resources, rows,
+                                                  groups)  # fmt: skip
         if not has_gt or hidden_ground_truth:
             if not poses.valid[:, 0].any():
                 raise EigsError(sfm_dir, "no training view has a valid reference pose (latent k = 0)")
@@ -213,12 +224,60 @@ def evaluate_run(
         ),
         "path": {"kind": path_kind, "frames": int(path_frames)} if path_kind else None,
         "motion": motion_metrics(run_dir, scene, poses.timestamps_us),
+        "test_pose_opt": pose_opt,
     }
     with atomic_path(output.parent / "per_image.csv") as tmp:
         tmp.write_text(per_image_csv(rows))
     with atomic_path(output) as tmp:
         tmp.write_text(json.dumps(result, indent=2, allow_nan=False) + "\n")
     return result
+
+
+def _score_refined_cameras(
+    g: Any, tc: Any, scene: Any, w: int, h: int, bg: np.ndarray, iters: int, tmp: Path, resources: str | None,
+    rows: list[dict[str, Any]], groups: dict[str, dict[str, Any]],
+) -> dict[str, Any]:
+    """The second protocol (:mod:`eigs.evaluate.test_poses`): each test camera refined on the frozen model against its
+    ground truth, rendered there and scored into ``<set>_pose_opt``; returns the protocol's facts and the sizes of
+    the refinements (rotation in degrees, translation in scene units: medians and maxima)."""
+    from eigs.artifacts.poses import METHODS
+    from eigs.evaluate.renderer import render_uint8
+    from eigs.evaluate.test_poses import LR, refine_test_camera
+    from eigs.util.image import write_png
+
+    rot, trans, before, after = [], [], [], []
+    for kind, base in KIND_NAMES.items():
+        name = f"{base}_pose_opt"
+        per: list[dict[str, float]] = []
+        for i in np.nonzero(tc.kind == kind)[0]:
+            row = int(tc.index[i])
+            ref = np.asarray(scene.sharp.images[row])
+            refined, e0, e1 = refine_test_camera(g, tc.c2w[i], tc.K[i], ref, w, h, bg, iters)
+            rel = np.linalg.inv(np.asarray(tc.c2w[i], np.float64)) @ refined
+            rot.append(math.degrees(math.acos(float(np.clip((np.trace(rel[:3, :3]) - 1) / 2, -1.0, 1.0)))))
+            trans.append(float(np.linalg.norm(rel[:3, 3])))
+            before.append(e0)
+            after.append(e1)
+            image = render_uint8(g, refined[None], np.asarray(tc.K[i])[None], w, h, bg)[0][0]
+            write_png(tmp / name / f"{row:04d}.png", image)
+            s = score_pair(image, ref, resources)
+            per.append(s)
+            rows.append({"set": name, "image": f"{row:04d}.png", "view": int(tc.view[i]),
+                         "camera": METHODS.get(int(tc.method[i]), "?"), **s})  # fmt: skip
+        if per:
+            groups[name] = group_means(name, per)
+    return {
+        "protocol": "test cameras refined on the frozen model against their images (eigs.evaluate.test_poses)",
+        "iters": int(iters),
+        "lr": LR,
+        "cameras": len(rot),
+        "rotation_deg_median": finite_or_none(float(np.median(rot))) if rot else None,
+        "rotation_deg_max": finite_or_none(float(np.max(rot))) if rot else None,
+        "translation_median": finite_or_none(float(np.median(trans))) if trans else None,
+        "translation_max": finite_or_none(float(np.max(trans))) if trans else None,
+        "l1_before_mean": finite_or_none(_mean(before)),
+        "l1_after_mean": finite_or_none(_mean(after)),
+    }
 
 
 def _score_brisque(

@@ -16,21 +16,10 @@ BAD-Gaussians' camera optimiser (gsplat-based; its `pose_opt_lr` 1e-3, decayed b
 
 from __future__ import annotations
 
-import math
-
 import torch
 from torch import Tensor
 
 from eigs.render.rigid import se3_exp, transform_gaussians
-
-
-def camera_lr(lr: float, lr_final: float, step: int, horizon: int) -> float:
-    """Exponential decay from ``lr`` at step 0 to ``lr_final`` at ``horizon`` (constant after it); linear when
-    either is 0."""
-    t = min(max(step / max(horizon, 1), 0.0), 1.0)
-    if lr <= 0 or lr_final <= 0:
-        return lr * (1 - t) + lr_final * t
-    return math.exp(math.log(lr) * (1 - t) + math.log(lr_final) * t)
 
 
 class CameraRefinement:

@@ -8,8 +8,6 @@ Parameters (N Gaussians, C colour channels, K = (d+1)² SH coefficients of the m
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import torch
 from torch import Tensor
@@ -17,6 +15,7 @@ from torch import Tensor
 from eigs.artifacts.gaussians import GaussianCloud
 from eigs.render.gaussians import render_gaussians
 from eigs.train.config import TrainConfig
+from eigs.util.schedule import exp_decay
 
 PARAM_NAMES = ("means", "sh0", "shN", "log_scales", "quats", "opacities")
 
@@ -129,10 +128,6 @@ def make_optimizer(model: GaussianModel, cfg: TrainConfig, extent: float) -> tor
 
 
 def means_lr(cfg: TrainConfig, extent: float, step: int) -> float:
-    """Exponential decay of the position learning rate from ``lr_means`` to ``lr_means_final`` over the schedule
-    (``cfg.horizon`` steps: the run, or the longer schedule the run stops in)."""
-    t = min(max(step / max(cfg.horizon, 1), 0.0), 1.0)
-    a, b = cfg.lr_means * extent, cfg.lr_means_final * extent
-    if a <= 0 or b <= 0:
-        return a * (1 - t) + b * t
-    return math.exp(math.log(a) * (1 - t) + math.log(b) * t)
+    """Exponential decay of the position learning rate from ``lr_means`` to ``lr_means_final`` (× ``extent``) over
+    the schedule (``cfg.horizon`` steps: the run, or the longer schedule the run stops in)."""
+    return exp_decay(cfg.lr_means * extent, cfg.lr_means_final * extent, step, cfg.horizon)

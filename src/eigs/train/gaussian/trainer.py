@@ -22,13 +22,14 @@ from eigs.artifacts.motion import RunMotion, sample_indices, write_motion
 from eigs.artifacts.run import MODEL_PLY, MOTION
 from eigs.train.config import TrainConfig
 from eigs.train.data import HeldOut, TrainData
-from eigs.train.gaussian.camera_refine import CameraRefinement, camera_lr
+from eigs.train.gaussian.camera_refine import CameraRefinement
 from eigs.train.gaussian.methods import Method
 from eigs.train.gaussian.model import PARAM_NAMES, GaussianModel, make_optimizer, means_lr, scene_extent
 from eigs.train.gaussian.strategy import DensifyStrategy
 from eigs.train.loop import RunResult, RunTrainer, fit, psnr_by_kind
 from eigs.train.resolve import build_method
 from eigs.util.options import Options
+from eigs.util.schedule import exp_decay
 
 log = logging.getLogger(__name__)
 
@@ -170,7 +171,7 @@ class Trainer(RunTrainer):
             if group.get("name") == "means":
                 group["lr"] = means_lr(cfg, self.extent, step)
             elif group.get("name") == CameraRefinement.NAME:
-                group["lr"] = camera_lr(cfg.lr_camera, cfg.lr_camera_final, step, cfg.horizon)
+                group["lr"] = exp_decay(cfg.lr_camera, cfg.lr_camera_final, step, cfg.horizon)
         out = self.method.step(self.model, sample, step, self.sh_degree_at(step))
         return out.loss, out.terms, out.infos
 
