@@ -56,19 +56,19 @@ class IngestOptions(Options):
     def problems(self) -> list[str]:
         out = []
         if self.keep_events is not None and self.keep_events not in KEEP_EVENTS:
-            out.append(f"--keep-events must be one of {', '.join(KEEP_EVENTS)}, got {self.keep_events!r}")
+            out.append(f"--keep-events: must be one of {', '.join(KEEP_EVENTS)}, got {self.keep_events!r}")
         if self.time_unit is not None and self.time_unit not in TIME_UNITS:
-            out.append(f"--time-unit must be one of {', '.join(TIME_UNITS)}, got {self.time_unit!r}")
+            out.append(f"--time-unit: must be one of {', '.join(TIME_UNITS)}, got {self.time_unit!r}")
         if self.compression is not None and self.compression not in COMPRESSIONS:
-            out.append(f"--compression must be one of {', '.join(COMPRESSIONS)}, got {self.compression!r}")
+            out.append(f"--compression: must be one of {', '.join(COMPRESSIONS)}, got {self.compression!r}")
         if self.exposure_us is not None and self.exposure_us[1] <= self.exposure_us[0]:
-            out.append(f"--exposure-us END must be after START, got {self.exposure_us[0]},{self.exposure_us[1]}")
+            out.append(f"--exposure-us: END must be after START, got {self.exposure_us[0]},{self.exposure_us[1]}")
         if self.time_window is not None and self.time_window[1] <= self.time_window[0]:
-            out.append(f"--time-window END must be after START, got {self.time_window[0]},{self.time_window[1]}")
+            out.append(f"--time-window: END must be after START, got {self.time_window[0]},{self.time_window[1]}")
         if self.contrast_threshold is not None and not (
             np.isfinite(self.contrast_threshold) and self.contrast_threshold > 0
         ):
-            out.append(f"--contrast-threshold must be a positive number, got {self.contrast_threshold}")
+            out.append(f"--contrast-threshold: must be a positive number, got {self.contrast_threshold}")
         return out
 
     def refuse(self, fmt: str, *names: str) -> None:
