@@ -165,14 +165,9 @@ def evaluate_run(
                 sel = np.nonzero(tc.kind == kind)[0]
                 per: list[dict[str, float]] = []
                 for i in sel:
-                    row = int(tc.index[i])
-                    ref = np.asarray(scene.sharp.images[row])
-                    write_png(tmp / name / f"{row:04d}.png", images[i])
-                    write_png(tmp / f"gt_{name}" / f"{row:04d}.png", ref)
-                    s = score_pair(images[i], ref, resources)
-                    per.append(s)
-                    rows.append({"set": name, "image": f"{row:04d}.png", "view": int(tc.view[i]),
-                                 "camera": METHODS.get(int(tc.method[i]), "?"), **s})  # fmt: skip
+                    ref = np.asarray(scene.sharp.images[int(tc.index[i])])
+                    write_png(tmp / f"gt_{name}" / f"{int(tc.index[i]):04d}.png", ref)
+                    per.append(_score_test_image(images[i], ref, tc, i, name, tmp, resources, rows))
                 if per:
                     groups[name] = group_means(name, per)
             if test_pose_iters > 0 and isinstance(g, CloudTensors):
@@ -233,6 +228,23 @@ def evaluate_run(
     return result
 
 
+def _score_test_image(
+    image: np.ndarray, ref: np.ndarray, tc: Any, i: int, name: str, tmp: Path, resources: str | None,
+    rows: list[dict[str, Any]],
+) -> dict[str, float]:
+    """Test camera ``i``'s render ``image`` written to ``tmp/<name>/`` and scored against ``ref``: its row appended
+    to ``rows`` (per_image.csv), its scores returned."""
+    from eigs.artifacts.poses import METHODS
+    from eigs.util.image import write_png
+
+    row = int(tc.index[i])
+    write_png(tmp / name / f"{row:04d}.png", image)
+    s = score_pair(image, ref, resources)
+    rows.append({"set": name, "image": f"{row:04d}.png", "view": int(tc.view[i]),
+                 "camera": METHODS.get(int(tc.method[i]), "?"), **s})  # fmt: skip
+    return s
+
+
 def _score_refined_cameras(
     g: Any, tc: Any, scene: Any, w: int, h: int, bg: np.ndarray, iters: int, tmp: Path, resources: str | None,
     rows: list[dict[str, Any]], groups: dict[str, dict[str, Any]],
@@ -240,18 +252,15 @@ def _score_refined_cameras(
     """The second protocol (:mod:`eigs.evaluate.test_poses`): each test camera refined on the frozen model against its
     ground truth, rendered there and scored into ``<set>_pose_opt``; returns the protocol's facts and the sizes of
     the refinements (rotation in degrees, translation in scene units: medians and maxima)."""
-    from eigs.artifacts.poses import METHODS
     from eigs.evaluate.renderer import render_uint8
     from eigs.evaluate.test_poses import LR, refine_test_camera
-    from eigs.util.image import write_png
 
     rot, trans, before, after = [], [], [], []
     for kind, base in KIND_NAMES.items():
         name = f"{base}_pose_opt"
         per: list[dict[str, float]] = []
         for i in np.nonzero(tc.kind == kind)[0]:
-            row = int(tc.index[i])
-            ref = np.asarray(scene.sharp.images[row])
+            ref = np.asarray(scene.sharp.images[int(tc.index[i])])
             refined, e0, e1 = refine_test_camera(g, tc.c2w[i], tc.K[i], ref, w, h, bg, iters)
             rel = np.linalg.inv(np.asarray(tc.c2w[i], np.float64)) @ refined
             rot.append(math.degrees(math.acos(float(np.clip((np.trace(rel[:3, :3]) - 1) / 2, -1.0, 1.0)))))
@@ -259,11 +268,7 @@ def _score_refined_cameras(
             before.append(e0)
             after.append(e1)
             image = render_uint8(g, refined[None], np.asarray(tc.K[i])[None], w, h, bg)[0][0]
-            write_png(tmp / name / f"{row:04d}.png", image)
-            s = score_pair(image, ref, resources)
-            per.append(s)
-            rows.append({"set": name, "image": f"{row:04d}.png", "view": int(tc.view[i]),
-                         "camera": METHODS.get(int(tc.method[i]), "?"), **s})  # fmt: skip
+            per.append(_score_test_image(image, ref, tc, i, name, tmp, resources, rows))
         if per:
             groups[name] = group_means(name, per)
     return {

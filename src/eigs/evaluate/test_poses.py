@@ -18,7 +18,7 @@ import torch
 
 from eigs.evaluate.renderer import CloudTensors
 from eigs.render.gaussians import render_gaussians
-from eigs.render.rigid import se3_exp, transform_gaussians
+from eigs.render.rigid import gaussian_motion, se3_exp, transform_gaussians
 from eigs.util.schedule import exp_decay
 
 LR = 1e-2  # the twists' Adam learning rate at the start (rad and scene units per step), decaying to LR / 100
@@ -41,7 +41,7 @@ def refine_test_camera(
     opt = torch.optim.Adam([xi], lr=lr)
 
     def l1() -> torch.Tensor:
-        means, quats = transform_gaussians(g.means, g.quats, (p @ se3_exp(-xi) @ p_inv).to(dev))
+        means, quats = transform_gaussians(g.means, g.quats, gaussian_motion(p, xi, p_inv).to(dev))
         img, _, _ = render_gaussians(means, quats, g.log_scales, g.opacity_logits, g.sh, p, k, width, height,
                                      background=bg, sh_degree=g.sh_degree)  # fmt: skip
         return (img - ref).abs().mean()

@@ -63,8 +63,8 @@ def fit_twist(x: Tensor, dx: Tensor, reg: float = DEFAULT_REG) -> tuple[Tensor, 
     ata[:3, 3:] = _skew(sx)
     ata[3:, :3] = -_skew(sx)
     ata[3:, 3:] = n * eye
-    # Aᵀb per field: −Σ x × δx = −Σ [x]ₓ δx, written as one product over the Gaussians: (K, 3) and −Σ δx (K, 3)
-    cross_sum = torch.einsum("nij,knj->ki", _skew_rows(xs), dd)
+    # Aᵀb per field: −Σ x × δx (K, 3) and −Σ δx (K, 3)
+    cross_sum = torch.cross(xs.expand_as(dd), dd, dim=2).sum(dim=1)
     atb = torch.cat([-cross_sum, -dd.sum(dim=1)], dim=1).T  # (6, K)
     # ξ = T ξ': ω = ω'/s, ν = ν' + c × ω'/s
     t = torch.zeros(6, 6, dtype=torch.float64, device=x.device)
@@ -80,13 +80,6 @@ def fit_twist(x: Tensor, dx: Tensor, reg: float = DEFAULT_REG) -> tuple[Tensor, 
     if not batched:
         return xi[0, :3], xi[0, 3:]
     return xi[:, :3], xi[:, 3:]
-
-
-def _skew_rows(v: Tensor) -> Tensor:
-    """(N, 3) → (N, 3, 3): the cross-product matrix of every row (skew(v_j) @ w = v_j × w)."""
-    z = torch.zeros_like(v[:, 0])
-    x, y, w = v.unbind(1)
-    return torch.stack([z, -w, y, w, z, -x, -y, x, z], dim=1).reshape(-1, 3, 3)
 
 
 def rigid_displacement(x: Tensor, omega: Tensor, nu: Tensor) -> Tensor:

@@ -109,3 +109,9 @@ def transform_gaussians(means: Tensor, quats: Tensor, t: Tensor) -> tuple[Tensor
         return moved, quat_multiply(qr[:, None, :].expand(-1, quats.shape[0], 4), quats.expand(t.shape[0], -1, 4))
     moved = means @ r.T + p
     return moved, quat_multiply(qr.expand_as(quats), quats)
+
+
+def gaussian_motion(c2w: Tensor, xi: Tensor, c2w_inv: Tensor) -> Tensor:
+    """(…, 4, 4) ``c2w · exp(−ξ) · c2w⁻¹``: the motion of the Gaussians that renders, from camera ``c2w``, what the
+    camera ``c2w · exp(ξ)`` sees (``xi`` (…, 6) a camera-frame twist; ``c2w_inv`` the inverse of ``c2w``)."""
+    return c2w @ se3_exp(-xi) @ c2w_inv

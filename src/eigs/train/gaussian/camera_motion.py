@@ -29,7 +29,7 @@ from eigs.losses.events import (
     normalized_event_loss,
     to_linear,
 )
-from eigs.render.rigid import se3_exp, se3_log, transform_gaussians
+from eigs.render.rigid import gaussian_motion, se3_exp, se3_log, transform_gaussians
 from eigs.train.config import TrainConfig
 from eigs.train.data import TrainData
 from eigs.train.event_inputs import EventInputs
@@ -120,7 +120,7 @@ class TrajectoryMethod(Method):
     def gaussian_motions(self, v: int) -> Tensor:
         """(n_virtual, 4, 4) rigid motions of the Gaussians that render view v's virtual cameras from P_ref."""
         xi = self.weights @ self.controls[v]  # (n_virtual, 6)
-        return self.ref_f[v] @ se3_exp(-xi) @ self.ref_inv_f[v]
+        return gaussian_motion(self.ref_f[v], xi, self.ref_inv_f[v])
 
     def step(self, model: GaussianModel, sample: int, step: int, sh_degree: int) -> StepOutput:
         o = self.o

@@ -19,7 +19,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from eigs.render.rigid import se3_exp, transform_gaussians
+from eigs.render.rigid import gaussian_motion, se3_exp, transform_gaussians
 
 
 class CameraRefinement:
@@ -40,8 +40,8 @@ class CameraRefinement:
     def world_motion(self, v: int) -> Tensor:
         """(4, 4) float64 ``W_v⁻¹ = P_v · exp(−ξ_v) · P_v⁻¹``, the motion of view v's Gaussians (differentiable in
         ``xi``)."""
-        ref, ref_inv = self.ref[v].to(self.xi.device), self.ref_inv[v].to(self.xi.device)
-        return ref @ se3_exp(-self.xi[v].to(torch.float64)) @ ref_inv
+        dev = self.xi.device
+        return gaussian_motion(self.ref[v].to(dev), self.xi[v].to(torch.float64), self.ref_inv[v].to(dev))
 
     def move(self, v: int, means: Tensor, quats: Tensor) -> tuple[Tensor, Tensor]:
         """View v's Gaussians, centres (N, 3) and rotations (N, 4), as its corrected cameras see them."""
@@ -55,9 +55,16 @@ class CameraRefinement:
     def state_dict(self) -> dict:
         return {"xi": self.xi.detach().cpu().clone()}
 
-    def load_state_dict(self, state: dict) -> None:
-        xi = state["xi"]
+    def state_problem(self, state: object) -> str | None:
+        """What makes a checkpoint's ``state`` (from :meth:`state_dict`) unusable here, or None."""
+        xi = state.get("xi") if isinstance(state, dict) else None
         if not isinstance(xi, Tensor) or xi.shape != self.xi.shape or not bool(torch.isfinite(xi).all()):
-            raise ValueError(f"camera corrections of shape {getattr(xi, 'shape', None)}, want {tuple(self.xi.shape)}")
+            return "camera corrections missing or damaged"
+        return None
+
+    def load_state_dict(self, state: dict) -> None:
+        problem = self.state_problem(state)
+        if problem is not None:
+            raise ValueError(problem)
         with torch.no_grad():
-            self.xi.copy_(xi.to(self.xi))
+            self.xi.copy_(state["xi"].to(self.xi))

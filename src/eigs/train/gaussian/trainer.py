@@ -128,12 +128,8 @@ class Trainer(RunTrainer):
         for group in opt.get("param_groups", []) if isinstance(opt.get("param_groups"), list) else []:
             if not isinstance(group, dict) or not _adam_hyperparameters_valid(group):
                 return f"optimizer hyperparameters of group {group.get('name') if isinstance(group, dict) else '?'}"
-        camera = state.get("camera")
-        if self.method.camera is not None and not (
-            isinstance(camera, dict) and isinstance(camera.get("xi"), torch.Tensor)
-            and camera["xi"].shape == self.method.camera.xi.shape and bool(torch.isfinite(camera["xi"]).all())
-        ):  # fmt: skip
-            return "camera corrections missing or damaged"
+        if self.method.camera is not None and (problem := self.method.camera.state_problem(state.get("camera"))):
+            return problem
         missing = [k for k in ("strategy", "method", "rng", "order") if k not in state]
         return f"missing {', '.join(missing)}" if missing else super().state_problem(state)
 
