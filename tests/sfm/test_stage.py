@@ -97,6 +97,44 @@ def test_colmap_mode_registers_latents_and_test_cameras(scene8, tmp_path):
     poses = read_poses(out)
     assert poses.mode == "colmap" and poses.registered.all()
     assert (out / "report.png").is_file()
+    check = rep["self_check"]
+    assert check["passed"] and check["enforced"] and check["failed_views"] == []
+    assert max(check["path_error"]) < check["limits"]["path_error"]
+
+
+def test_self_check_drops_a_failed_view_and_stops_on_a_broken_path(scene8, tmp_path, monkeypatch):
+    """The stage acts on the self-check's verdict (eigs.sfm.selfcheck, tested on its own in test_selfcheck.py):
+    a failed view loses its poses like an unregistered one; a failed reconstruction stops the stage with one line
+    and writes nothing; with self_check off it is reported only."""
+    import eigs.sfm.selfcheck as sc
+
+    real = sc.self_check
+
+    def one_view_off(c2w, registered, t_us, models=None):
+        out = real(c2w, registered, t_us, models)
+        out.failed_views = [3]
+        return out
+
+    monkeypatch.setattr(sc, "self_check", one_view_off)
+    out = tmp_path / "dropped"
+    rep = run_sfm(scene8["scene"], scene8["edi"], out, cfg=SfmConfig(mode="colmap"))
+    poses = read_poses(out)
+    assert not poses.valid[3].any() and poses.valid[np.arange(8) != 3].all()
+    assert rep["registration"]["dropped_by_self_check"] == [3] and 3 in rep["registration"]["views_without_all_poses"]
+
+    def broken(c2w, registered, t_us, models=None):
+        out = real(c2w, registered, t_us, models)
+        out.passed, out.reasons = False, ["the camera path breaks: (made up by the test)"]
+        return out
+
+    monkeypatch.setattr(sc, "self_check", broken)
+    out = tmp_path / "stopped"
+    with pytest.raises(EigsError, match=r"SfM self-check failed: the camera path breaks.*self_check: false"):
+        run_sfm(scene8["scene"], scene8["edi"], out, cfg=SfmConfig(mode="colmap"))
+    assert not out.exists()
+    rep = run_sfm(scene8["scene"], scene8["edi"], out, cfg=SfmConfig(mode="colmap", self_check=False))
+    assert rep["self_check"]["passed"] is False and rep["self_check"]["enforced"] is False
+    assert read_poses(out).valid.all()
 
 
 def test_unregistered_latents_are_interpolated_within_their_view(scene8, tmp_path):

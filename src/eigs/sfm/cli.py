@@ -48,6 +48,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="leave unregistered latents NaN instead of interpolating")  # fmt: skip
     p.add_argument("--no-register-test", dest="register_test_cameras", action="store_const", const=False,
                    help="test cameras from the Sim(3) only")  # fmt: skip
+    p.add_argument("--no-self-check", dest="self_check", action="store_const", const=False,
+                   help="report the self-check of the camera path, but drop no view and never stop on it")  # fmt: skip
     p.add_argument("--feature-scale", type=int, metavar="F", help="SIFT upsampling (default auto)")
     p.add_argument("--max-features", dest="max_num_features", type=int, metavar="N",
                    help=f"SIFT features per image (default {_C.max_num_features})")  # fmt: skip

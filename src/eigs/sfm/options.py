@@ -49,8 +49,10 @@ class SfmConfig(Options):
     to COLMAP, below which the
     stage stops; ``interpolate_unregistered``: fill unregistered latents from registered latents of the same
     view; ``register_test_cameras``: register the ground-truth sharp images into the model (else the Sim(3)-mapped
-    ground truth). ``keep_work``, ``verbose`` and ``plot`` are run control, not config options. The COLMAP options'
-    config keys sit beside these in the `sfm:` section (``colmap`` is nested: ``eigs.util.options``)."""
+    ground truth); ``self_check``: COLMAP mode drops the views that leave the camera path and stops when the path
+    breaks (eigs.sfm.selfcheck; false: report only). ``keep_work``, ``verbose`` and ``plot`` are run control, not
+    config options. The COLMAP options' config keys sit beside these in the `sfm:` section (``colmap`` is nested:
+    ``eigs.util.options``)."""
 
     mode: str = choice("auto", MODES)
     allow_given: bool = True
@@ -59,6 +61,7 @@ class SfmConfig(Options):
     min_registered_fraction: float = 0.5
     interpolate_unregistered: bool = True
     register_test_cameras: bool = True
+    self_check: bool = True
     keep_work: bool = run_control(False)
     verbose: bool = run_control(False)
     plot: bool = run_control(True)

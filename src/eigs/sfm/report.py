@@ -39,8 +39,9 @@ def write_report(
 def plot_report(
     path: Path, c2w: np.ndarray, registered: np.ndarray, gt: np.ndarray | None, est_to_gt: Sim3 | None, report: dict
 ) -> None:
-    """``report.png``: camera centres (canonical x–y) against the aligned ground truth, and the relative latent
-    errors per moving view (report["accuracy"]["relative_latent"])."""
+    """``report.png``: camera centres (canonical x–y) against the aligned ground truth, the relative latent
+    errors per moving view (report["accuracy"]["relative_latent"]) and the self-check's figures per view, as
+    fractions of their limits (report["self_check"], COLMAP mode)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -49,7 +50,8 @@ def plot_report(
     est = c2w.reshape(-1, 4, 4)
     ok = np.all(np.isfinite(est), axis=(1, 2))
     reg = registered.reshape(-1)
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.5))
+    check = report.get("self_check")
+    fig, axes = plt.subplots(1, 3 if check else 2, figsize=(16.5 if check else 11, 4.5))
     ax = axes[0]
     if gt is not None and est_to_gt is not None:
         canon_gt = est_to_gt.inverse().apply_c2w(gt.reshape(-1, 4, 4))
@@ -81,9 +83,28 @@ def plot_report(
     else:
         ax.axis("off")
         ax.text(0.5, 0.5, "no ground truth", ha="center", va="center")
+    if check:
+        _plot_self_check(axes[2], check)
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)
+
+
+def _plot_self_check(ax, check: dict) -> None:
+    """Path and turn errors per view over their limits (1 = the limit), failed views marked."""
+    p = np.array([np.nan if x is None else x for x in check["path_error"]]) / check["limits"]["path_error"]
+    r = np.array([np.nan if x is None else x for x in check["turn_error_deg"]]) / check["limits"]["turn_error_deg"]
+    x = np.arange(p.size)
+    ax.bar(x - 0.2, p, 0.4, label="path error / limit")
+    ax.bar(x + 0.2, r, 0.4, label="turn error / limit")
+    ax.axhline(1.0, color="k", lw=0.8, ls="--")
+    for v in check["failed_views"]:
+        ax.axvspan(v - 0.5, v + 0.5, color="r", alpha=0.15, lw=0)
+    ax.set_xlabel("view (failed: red)")
+    ax.set_ylabel("fraction of the limit")
+    ax.legend(fontsize=8)
+    verdict = "passed" if check["passed"] else "FAILED"
+    ax.set_title(f"self-check {verdict}: {len(check['failed_views'])} view(s) off the camera path")
 
 
 def jsonable(x: Any) -> Any:

@@ -146,6 +146,8 @@ def run_sfm(
         else:
             rec, rejected = _colmap_reconstruction(db, ldir, work, lat, px, cfg, timer, report)
         raw, registered = _registration(rec, lat, edi.sharp, rejected, mode, cfg, out_dir, report)
+        if mode == "colmap":
+            raw, registered = _self_check(rec, raw, registered, edi.timestamps_us, lat, cfg, out_dir, report)
         canon, c2w = _canonical_frame(rec, raw, registered, report)
         c2w, interpolated = _fill_unregistered(c2w, registered, edi.timestamps_us, cfg, report)
         _drop_points(rec, lat, report)
@@ -371,6 +373,41 @@ def _registration(rec, lat: _Latents, sharp, rejected, mode, cfg, out_dir, repor
             f"only {n_reg} of {len(names)} latent frames registered ({100 * frac:.0f} % < "
             f"{100 * cfg.min_registered_fraction:.0f} %); unregistered: {shown}. Remedies: {_remedies(mode)}",
         )
+    return raw, registered
+
+
+def _self_check(rec, raw, registered, timestamps_us, lat: _Latents, cfg, out_dir, report):
+    """The self-check of the camera path (eigs.sfm.selfcheck) into ``report["self_check"]``; with
+    ``cfg.self_check`` the views that fail it are deregistered (their latents count as unregistered) and a broken
+    path stops the stage. Returns (raw, registered) without the dropped views."""
+    from eigs.sfm.selfcheck import self_check
+
+    sc = self_check(raw, registered, timestamps_us, report.get("models"))
+    report["self_check"] = {"enforced": cfg.self_check, **sc.summary()}
+    for v in sc.failed_views:
+        log.warning("self-check: view %d lies off the camera path (path error %.2f steps, turn %.1f°)%s", v,
+                    sc.path_error[v], sc.turn_error_deg[v], "; dropped" if cfg.self_check else "")  # fmt: skip
+    if not sc.passed:
+        msg = "SfM self-check failed: " + "; ".join(sc.reasons)
+        if cfg.self_check:
+            raise EigsError(
+                out_dir,
+                f"{msg}. Its poses are not one camera moving in time; try the other mapper (`sfm: global_mapping`), "
+                "sharper latent frames (an estimated EDI contrast threshold, more bins), given poses, or "
+                "`sfm: self_check: false` to train on it anyway",
+            )
+        log.warning("%s (self_check is off: training on it)", msg)
+    if not cfg.self_check or not sc.failed_views:
+        return raw, registered
+    by_name = {im.name: im for im in rec.images.values() if im.has_pose}
+    raw, registered = raw.copy(), registered.copy()
+    for v in sc.failed_views:
+        for (vv, _k), n in zip(lat.slots, lat.names, strict=True):
+            if vv == v and n in by_name:
+                rec.deregister_frame(by_name[n].frame_id)
+        raw[v] = np.nan
+        registered[v] = False
+    report["registration"]["dropped_by_self_check"] = [int(v) for v in sc.failed_views]
     return raw, registered
 
 
