@@ -136,6 +136,11 @@ def test_unregistered_views_gaps_and_too_few_views():
     reg[10, 1:] = False  # one latent is enough for a view pose
     sc = self_check(np.where(reg[..., None, None], c2w, np.nan), reg, times())
     assert sc.passed and np.isnan(sc.path_error[[4, 5, 17]]).all() and np.isfinite(sc.path_error[10])
+    sparse = REG.copy()
+    sparse[[2, 4, 5, 11, 17]] = False  # 5 of 24 views without a pose: more than a fifth of the recording
+    sc = self_check(np.where(sparse[..., None, None], c2w, np.nan), sparse, times())
+    assert not sc.passed and sc.reasons == ["only 19 of 24 views have a pose (limit 20% of the views; path error > "
+                                            "1 steps or turn > 15°)"]  # fmt: skip
     few = np.zeros((V, L), bool)
     few[:MIN_VIEWS - 1] = True
     sc = self_check(c2w, few, times())
