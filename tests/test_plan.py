@@ -116,6 +116,29 @@ def test_stage_sections_fail_on_one_line_naming_the_key(section, words):
     plan.check_sections(merge_configs([yaml.safe_load((REPO / "config" / "config.yaml").read_text())]))
 
 
+@pytest.mark.parametrize(
+    ("options", "line"),
+    [
+        (["--camera-response", "log"], "argument --camera-response: invalid choice: 'log'"),
+        (["--time-window", "5,1"], "--time-window: END must be after START, got 5,1"),
+        (["--groundtruth"], "argument --groundtruth: expected one argument"),
+        (["--bogus", "1"], "not `eigs ingest` flags or their values: --bogus 1"),
+        (["--views", "0:3", "extra.h5"], "not `eigs ingest` flags or their values: extra.h5"),
+        ("--views 0:3", "expected a list of `eigs ingest` flags and values"),
+    ],
+)
+def test_ingest_options_are_checked_when_planned(options, line):
+    """A scene's `options:` go through `eigs ingest`'s own parser and option checks at planning, on one line naming
+    the scene; the real configs' options pass."""
+    cfg = {"scenes": {"rec": {"source": "rec.h5", "format": "h5", "options": options}}}
+    with pytest.raises(ValueError) as err:
+        plan.check(cfg)
+    msg = str(err.value)
+    assert msg.startswith("config: scene rec: options: ") and line in msg and "\n" not in msg, msg
+    plan.check(yaml.safe_load((REPO / "config" / "davis346.yaml").read_text()))
+    plan.check(yaml.safe_load((REPO / "config" / "real.yaml").read_text()))
+
+
 def test_a_dry_run_names_a_bad_stage_option(tmp_path):
     cfg = tmp_path / "c.yaml"
     cfg.write_text("scenes:\n  toy: {builtin: toy}\nsfm: {matcher: vocab}\n")

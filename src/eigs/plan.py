@@ -221,10 +221,40 @@ def check(config: Config) -> None:
         if fmt not in FORMATS:
             accepted = ", ".join(FORMATS)
             raise ValueError(f"config: scene {scene}: format {fmt!r} is not one `eigs ingest` reads ({accepted})")
+        check_ingest_options(scene, fmt, config["scenes"][scene].get("options", []))
     for scene in all_scenes(config):
         sfm_rule(config, scene)
     for run in runs(config):
         run_scenes(config, run)
+
+
+def check_ingest_options(scene: str, fmt: str, options: list) -> None:
+    """A scene's `options:` (the `eigs ingest` flags its rule appends) through the ingest CLI's own parser and
+    option checks, as the rule gives them (``--format F --name SCENE OPTIONS SOURCE -o OUT``): an unknown
+    flag, a missing or malformed value fails the dry run on one line naming the scene."""
+    import argparse
+
+    from eigs.errors import EigsError
+    from eigs.ingest.cli import add_arguments, options_from_args
+
+    class Parser(argparse.ArgumentParser):
+        def error(self, message: str):  # argparse would print usage and exit
+            raise ValueError(message)
+
+    where = f"config: scene {scene}: options"
+    if not isinstance(options, list):
+        raise ValueError(f"{where}: expected a list of `eigs ingest` flags and values, got {options!r}")
+    parser = Parser(prog="eigs ingest", add_help=False)
+    add_arguments(parser)
+    argv = ["--format", fmt, "--name", scene, "-o", "OUT.h5", *(str(o) for o in options), "--", "SOURCE"]
+    try:
+        args, extra = parser.parse_known_args(argv)
+        stray = [a for a in extra if a != "SOURCE"] + ([args.source] if args.source != "SOURCE" else [])
+        if stray:
+            raise ValueError(f"not `eigs ingest` flags or their values: {' '.join(stray)}")
+        options_from_args(args)
+    except (ValueError, EigsError) as err:
+        raise ValueError(f"{where}: {err}") from None
 
 
 # --- jobs -----------------------------------------------------------------------------------------------------
