@@ -155,6 +155,20 @@ def test_a_split_model_fails_and_a_small_second_model_does_not():
     assert not sc.passed and "split" in sc.reasons[0]
 
 
+def test_independent_viewpoints_are_not_judged_as_a_path():
+    """Random views of a sphere (a synthetic set's viewpoints, not one recording) are no path: the check does not
+    apply, drops nothing and passes, however wrong a neighbour's prediction is."""
+    rng = np.random.default_rng(0)
+    pos = rng.normal(size=(60, 3))
+    pos = 4.0 * pos / np.linalg.norm(pos, axis=1, keepdims=True)
+    pos[:, 2] = np.abs(pos[:, 2]) + 0.5
+    c2w = np.repeat(look_at(pos, np.zeros(3))[:, None], L, axis=1)
+    t = (np.linspace(0, EXPOSURE_US, L)[None, :] + PERIOD_US * np.arange(60)[:, None]).astype(np.int64)
+    sc = self_check(c2w, np.ones((60, L), bool), t)
+    assert not sc.applicable and sc.passed and sc.failed_views == [] and sc.reasons == []
+    assert self_check(orbit(), REG, times()).applicable
+
+
 def test_summary_is_json_ready():
     import json
 

@@ -384,6 +384,9 @@ def _self_check(rec, raw, registered, timestamps_us, lat: _Latents, cfg, out_dir
 
     sc = self_check(raw, registered, timestamps_us, report.get("models"))
     report["self_check"] = {"enforced": cfg.self_check, **sc.summary()}
+    if not sc.applicable:
+        log.info("self-check: not applied, the views are not one path in time (median path error %.2f steps: "
+                 "independent viewpoints)", report["self_check"]["path_error_median"])  # fmt: skip
     for v in sc.failed_views:
         log.warning("self-check: view %d lies off the camera path (path error %.2f steps, turn %.1f°)%s", v,
                     sc.path_error[v], sc.turn_error_deg[v], "; dropped" if cfg.self_check else "")  # fmt: skip
