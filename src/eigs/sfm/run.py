@@ -402,14 +402,13 @@ def _self_check(rec, raw, registered, timestamps_us, lat: _Latents, cfg, out_dir
         log.warning("%s (self_check is off: training on it)", msg)
     if not cfg.self_check or not sc.failed_views:
         return raw, registered
-    by_name = {im.name: im for im in rec.images.values() if im.has_pose}
+    failed = set(sc.failed_views)
+    for im in list(rec.images.values()):
+        if im.has_pose and lat.view_of_name[im.name] in failed:
+            rec.deregister_frame(im.frame_id)
     raw, registered = raw.copy(), registered.copy()
-    for v in sc.failed_views:
-        for (vv, _k), n in zip(lat.slots, lat.names, strict=True):
-            if vv == v and n in by_name:
-                rec.deregister_frame(by_name[n].frame_id)
-        raw[v] = np.nan
-        registered[v] = False
+    raw[sc.failed_views] = np.nan
+    registered[sc.failed_views] = False
     report["registration"]["dropped_by_self_check"] = [int(v) for v in sc.failed_views]
     return raw, registered
 
