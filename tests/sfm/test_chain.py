@@ -11,8 +11,8 @@ import pytest
 from eigs.artifacts.gaussians import read_gaussian_ply
 from eigs.artifacts.poses import METHOD_GIVEN, read_poses, read_test_cameras
 from eigs.cli import main
+from eigs.metrics.trajectory import Sim3, extent
 from eigs.scene import read_scene
-from eigs.sfm.align import Sim3, extent
 
 
 def canonical_of(poses) -> Sim3:

@@ -14,7 +14,7 @@ from eigs.artifacts.edi import latent_png_name
 from eigs.artifacts.poses import METHOD_FALLBACK, METHOD_GIVEN, METHOD_REGISTERED, read_poses, read_test_cameras
 from eigs.cli import main
 from eigs.errors import EigsError
-from eigs.sfm.align import Sim3, extent, umeyama
+from eigs.metrics.trajectory import Sim3, extent, umeyama
 from eigs.sfm.colmap import c2w_of
 from eigs.sfm.run import SfmConfig, run_sfm
 

@@ -6,9 +6,12 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 import torch
 
+from eigs.artifacts.cameras import read_refined_cameras
+from eigs.artifacts.run import CAMERAS
 from eigs.errors import EigsError
 from eigs.render.gaussians import render_gaussians
 from eigs.train.config import TrainConfig
@@ -155,8 +158,16 @@ def test_the_switch_in_the_trainer(toy, tmp_path):
     resumed = train(data, cfg, tmp_path / "resumed")
     torch.testing.assert_close(resumed.method.camera.xi, full.method.camera.xi, rtol=0, atol=0)
     torch.testing.assert_close(resumed.model.params["means"], full.model.params["means"], rtol=0, atol=0)
+    # the run folder holds the cameras before and after: after = before · exp(ξ), against torch's matrix exponential
+    cams = read_refined_cameras(tmp_path / "full")
+    xi = full.method.camera.xi.detach().to(F64)
+    np.testing.assert_array_equal(cams.twist, xi.numpy())
+    np.testing.assert_array_equal(cams.views, np.isfinite(data.c2w[:, 0].numpy()).all(axis=(1, 2)))
+    for v in np.flatnonzero(cams.views):
+        expected = torch.from_numpy(cams.before[v]) @ torch.linalg.matrix_exp(_hat(xi[v]))
+        np.testing.assert_allclose(cams.after[v], expected.numpy(), rtol=0, atol=1e-12)
     off = train(data, TrainConfig.from_dict({**base, "method": "3dgs", "camera_refine": False}), tmp_path / "off")
-    assert off.method.camera is None
+    assert off.method.camera is None and not (tmp_path / "off" / CAMERAS).exists()
     assert not torch.equal(off.model.params["means"], full.model.params["means"])
     with pytest.raises(EigsError, match="camera_refine.*field method"):
         resolve_run({"method": "e2nerf", "camera_refine": True})

@@ -2,8 +2,9 @@
 (``model.ply``, a Gaussian cloud, :mod:`eigs.artifacts.gaussians`; or ``model.npz``, a radiance field,
 :mod:`eigs.artifacts.field`), ``config.json`` (sections ``train``, ``inputs``, ``run``), ``train_log.csv`` (one row
 per logged step), ``motion.npz`` (:mod:`eigs.artifacts.motion`) for methods that model motion within the exposure,
-and the checkpoints in the sibling ``<run>.partial/``. Training writes it (:mod:`eigs.train.loop`); evaluation,
-``eigs render``, the tables, the viewer, the rules and the bench tools read it through these names."""
+``cameras.npz`` (:mod:`eigs.artifacts.cameras`) for runs that refined their cameras, and the checkpoints in the
+sibling ``<run>.partial/``. Training writes it (:mod:`eigs.train.loop`); evaluation, ``eigs render``, the tables,
+the viewer, the rules and the bench tools read it through these names."""
 
 from __future__ import annotations
 
@@ -19,6 +20,7 @@ MODEL_FILES = (MODEL_PLY, MODEL_NPZ)  # one of them marks a finished run folder
 CONFIG = "config.json"
 LOG = "train_log.csv"
 MOTION = "motion.npz"
+CAMERAS = "cameras.npz"  # the refined training cameras (TrainConfig.camera_refine)
 CHECKPOINT = "checkpoint.pt"  # in the partial folder
 
 

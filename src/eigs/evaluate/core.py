@@ -219,6 +219,7 @@ def evaluate_run(
         ),
         "path": {"kind": path_kind, "frames": int(path_frames)} if path_kind else None,
         "motion": motion_metrics(run_dir, scene, poses.timestamps_us),
+        "cameras": camera_metrics(run_dir, scene, poses.timestamps_us),
         "test_pose_opt": pose_opt,
     }
     with atomic_path(output.parent / "per_image.csv") as tmp:
@@ -362,6 +363,46 @@ def motion_metrics(run_dir: Path, scene: Any, timestamps_us: np.ndarray) -> dict
     errs = motion_errors(m.points, m.displacement, m.reference_c2w, gt, m.views, m.camera_c2w)
     return {"ground_truth": source, "points": int(m.points.shape[0]),
             **{k: finite_or_none(v) if isinstance(v, float) else v for k, v in errs.items()}}  # fmt: skip
+
+
+def camera_metrics(run_dir: Path, scene: Any, timestamps_us: np.ndarray) -> dict[str, Any] | None:
+    """The run's training cameras before and after camera refinement against the ground truth at the views' reference
+    times (latent k = 0): ATE (RMSE of the centres after a Sim(3) fit of each set on its own, and in % of the
+    ground-truth extent) and rotation errors (:func:`eigs.metrics.trajectory.trajectory_accuracy`), over the views
+    trained with a pose and a ground truth. None when the run did not refine its cameras (no ``cameras.npz``) or the
+    scene has no ground-truth poses."""
+    from eigs.artifacts.cameras import read_refined_cameras
+    from eigs.artifacts.run import CAMERAS
+    from eigs.metrics.trajectory import extent, trajectory_accuracy
+    from eigs.scene.truth import latent_poses_at
+
+    if not (run_dir / CAMERAS).exists():
+        return None
+    got = latent_poses_at(scene, timestamps_us)
+    if got is None:
+        log.info("%s: the scene has no ground-truth poses; refined cameras not scored", run_dir)
+        return None
+    gt, source = got
+    cams = read_refined_cameras(run_dir)
+    if gt.shape[0] != cams.views.shape[0]:
+        raise EigsError(run_dir / CAMERAS, f"cameras of {cams.views.shape[0]} views do not match the ground truth's "
+                        f"{gt.shape[0]}")  # fmt: skip
+    gt0 = gt[:, 0]
+    use = cams.views & np.all(np.isfinite(gt0), axis=(1, 2))
+    if int(use.sum()) < 3:
+        log.info("%s: %d trained views with ground truth, 3 needed for a Sim(3); refined cameras not scored",
+                 run_dir, int(use.sum()))  # fmt: skip
+        return None
+    ext = extent(gt0[use][:, :3, 3])
+    out: dict[str, Any] = {"ground_truth": source, "views": int(use.sum())}
+    for name, c2w in (("before", cams.before), ("after", cams.after)):
+        acc = trajectory_accuracy(c2w[use], gt0[use], gt_extent=ext)
+        out[name] = {"ate_percent_of_extent": finite_or_none(acc.ate_percent),
+                     "rotation_error_deg_median": finite_or_none(float(np.median(acc.rotation_errors_deg))),
+                     "rotation_error_deg_max": finite_or_none(float(acc.rotation_errors_deg.max()))}  # fmt: skip
+    turn = np.linalg.norm(cams.twist[use, :3], axis=1)
+    out["correction_deg_median"] = float(np.degrees(np.median(turn)))
+    return out
 
 
 def per_image_csv(rows: list[dict[str, Any]]) -> str:

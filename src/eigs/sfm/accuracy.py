@@ -10,8 +10,8 @@ import numpy as np
 
 if TYPE_CHECKING:
     from eigs.artifacts.edi import EdiResult
+    from eigs.metrics.trajectory import Sim3
     from eigs.scene.model import Scene
-    from eigs.sfm.align import Sim3
 
 log = logging.getLogger(__name__)
 
@@ -58,7 +58,7 @@ def ground_truth_accuracy(
 
 def accuracy(c2w: np.ndarray, registered: np.ndarray, gt: np.ndarray, sharp: np.ndarray) -> tuple[Sim3, dict]:
     """Sim(3) of registered latents onto ground truth, ATE, rotation errors, relative latent errors."""
-    from eigs.sfm.align import extent, latent_relative_errors, motion_ratio_per_view, trajectory_accuracy
+    from eigs.metrics.trajectory import extent, latent_relative_errors, motion_ratio_per_view, trajectory_accuracy
 
     g = gt.reshape(-1, 4, 4)
     ext = extent(g[np.all(np.isfinite(g), axis=(1, 2))][:, :3, 3])

@@ -11,7 +11,7 @@ import logging
 
 import numpy as np
 
-from eigs.sfm.align import Sim3
+from eigs.metrics.trajectory import Sim3
 
 log = logging.getLogger(__name__)
 

@@ -15,7 +15,7 @@ from collections import defaultdict
 
 import numpy as np
 
-from eigs.sfm.align import project_to_rotation, rotation_angle_deg
+from eigs.metrics.trajectory import project_to_rotation, rotation_angle_deg
 
 log = logging.getLogger(__name__)
 

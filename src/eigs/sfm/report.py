@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
-    from eigs.sfm.align import Sim3
+    from eigs.metrics.trajectory import Sim3
 
 log = logging.getLogger(__name__)
 

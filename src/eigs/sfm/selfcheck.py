@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from eigs.sfm.align import project_to_rotation, rotation_angle_deg
+from eigs.metrics.trajectory import project_to_rotation, rotation_angle_deg
 
 MAX_PATH_ERROR = 1.0  # typical steps between consecutive views
 MAX_TURN_DEG = 15.0  # degrees

@@ -14,8 +14,8 @@ from eigs.errors import EigsError
 
 if TYPE_CHECKING:
     from eigs.artifacts.poses import TestCameras
+    from eigs.metrics.trajectory import Sim3
     from eigs.scene.model import Scene
-    from eigs.sfm.align import Sim3
     from eigs.sfm.options import ColmapOptions, SfmConfig
 
 log = logging.getLogger(__name__)
@@ -37,7 +37,7 @@ def place_test_cameras(
     into ``rec`` (pycolmap model, database ``db``) when ``cfg.register_test_cameras``, and the rest mapped from the
     ground truth by ``est_to_gt``⁻¹ (or by the registered ones' alignment)."""
     from eigs.artifacts.poses import METHOD_FALLBACK, METHOD_GIVEN, METHOD_REGISTERED, METHODS, TestCameras
-    from eigs.sfm.align import trajectory_accuracy, umeyama
+    from eigs.metrics.trajectory import trajectory_accuracy, umeyama
 
     sh = scene.sharp
     cam = scene.camera

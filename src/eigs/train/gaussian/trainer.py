@@ -17,9 +17,10 @@ from typing import Any
 import numpy as np
 import torch
 
+from eigs.artifacts.cameras import RefinedCameras, write_refined_cameras
 from eigs.artifacts.gaussians import write_gaussian_ply
 from eigs.artifacts.motion import RunMotion, sample_indices, write_motion
-from eigs.artifacts.run import MODEL_PLY, MOTION
+from eigs.artifacts.run import CAMERAS, MODEL_PLY, MOTION
 from eigs.train.config import TrainConfig
 from eigs.train.data import HeldOut, TrainData
 from eigs.train.gaussian.camera_refine import CameraRefinement
@@ -33,7 +34,7 @@ from eigs.util.schedule import exp_decay
 
 log = logging.getLogger(__name__)
 
-__all__ = ["LOG_COLUMNS", "RunResult", "Trainer", "held_out_psnr", "run_motion", "train"]
+__all__ = ["LOG_COLUMNS", "RunResult", "Trainer", "held_out_psnr", "run_cameras", "run_motion", "train"]
 
 ADAM_STATE = ("step", "exp_avg", "exp_avg_sq")  # what torch.optim.Adam keeps per parameter (amsgrad off)
 LOG_COLUMNS = ("step", "wall_s", "loss", "n_gaussians", "psnr_novel", "psnr_blur")
@@ -225,6 +226,9 @@ class Trainer(RunTrainer):
         motion = run_motion(self)
         if motion is not None:
             write_motion(motion, folder / MOTION)
+        cameras = run_cameras(self)
+        if cameras is not None:
+            write_refined_cameras(cameras, folder / CAMERAS)
 
 
 def train(
@@ -259,3 +263,15 @@ def run_motion(tr: Trainer) -> RunMotion | None:
         views=m.views,
         camera_c2w=None if m.camera_c2w is None else m.camera_c2w.cpu().numpy(),
     )
+
+
+def run_cameras(tr: Trainer) -> RefinedCameras | None:
+    """The training cameras before and after camera refinement (:mod:`eigs.artifacts.cameras`); None when the run
+    did not refine them."""
+    cam = tr.method.camera
+    if cam is None:
+        return None
+    views = np.zeros(cam.ref.shape[0], bool)
+    views[tr.data.reference_views()] = True
+    return RefinedCameras(method=tr.cfg.method, before=cam.ref.cpu().numpy(), after=cam.corrected_c2w().numpy(),
+                          twist=cam.xi.detach().cpu().to(torch.float64).numpy(), views=views)  # fmt: skip

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from eigs.sfm.align import (
+from eigs.metrics.trajectory import (
     Sim3,
     align_trajectory,
     extent,
