@@ -1,0 +1,35 @@
+"""The camera-refinement study (config/camera_refine.yaml, issue 44) measures the default suite's runs: each pair must
+train exactly as config/config.yaml's run, the refined one differing only in camera_refine, on the suite's own scenes
+and upstream stages (so results/<scene>/b4/ is shared), scored by both evaluation protocols."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import yaml
+
+from tests.tables.test_table2_rows import differing, resolved
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def load(name: str) -> dict:
+    return yaml.safe_load((REPO / "config" / name).read_text())
+
+
+def test_each_pair_is_the_suite_run_and_its_refined_twin():
+    suite, study = load("config.yaml"), load("camera_refine.yaml")
+    assert set(study["runs"]) == {f"{r}{s}" for r in ("edi-3dgs", "oracle", "eigs+") for s in ("", "-cam")}
+    for run in ("edi-3dgs", "oracle", "eigs+"):
+        plain, refined = resolved(study["runs"][run]), resolved(study["runs"][f"{run}-cam"])
+        assert plain == resolved(suite["runs"][run]), run
+        assert differing(plain, refined) == {"train.camera_refine"} and refined["train.camera_refine"], run
+
+
+def test_the_scenes_and_upstream_stages_are_the_suite_ones_and_both_protocols_are_scored():
+    suite, study = load("config.yaml"), load("camera_refine.yaml")
+    assert study["scenes"] == suite["scenes"]
+    assert study["edi"]["bins"] == [4] and 4 in suite["edi"]["bins"]
+    assert study["sfm"] == suite["sfm"] and study["threads"] == suite["threads"]
+    assert study.get("init") == suite.get("init")
+    assert study["evaluate"]["test_pose_iters"] > 0
