@@ -15,15 +15,13 @@ evaluation, which scores both sets against the ground truth (:func:`eigs.metrics
 from __future__ import annotations
 
 import os
-import zipfile
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
+from eigs.artifacts._npz import read_npz, write_npz
 from eigs.artifacts.run import CAMERAS
 from eigs.errors import EigsError
-from eigs.util.atomic import atomic_path
 
 CAMERAS_FORMAT = "eigs-refined-cameras"
 FORMAT_VERSION = 1
@@ -53,33 +51,18 @@ class RefinedCameras:
 
 def write_refined_cameras(cameras: RefinedCameras, path: str | os.PathLike) -> None:
     cameras.validate(path)
-    with atomic_path(path) as tmp, open(tmp, "wb") as f:
-        np.savez(
-            f,
-            format=np.array(CAMERAS_FORMAT),
-            version=np.array(FORMAT_VERSION),
-            method=np.array(cameras.method),
-            before=cameras.before.astype(np.float64),
-            after=cameras.after.astype(np.float64),
-            twist=cameras.twist.astype(np.float64),
-            views=cameras.views.astype(bool),
-        )
+    arrays = {"method": np.array(cameras.method), "views": cameras.views.astype(bool)}
+    arrays |= {name: getattr(cameras, name).astype(np.float64) for name in ("before", "after", "twist")}
+    write_npz(path, CAMERAS_FORMAT, FORMAT_VERSION, arrays)
 
 
 def read_refined_cameras(path: str | os.PathLike) -> RefinedCameras:
     """Read a run's ``cameras.npz`` (or the run folder holding it)."""
-    p = Path(path)
-    if p.is_dir():
-        p = p / CAMERAS
+    p, z = read_npz(path, CAMERAS, CAMERAS_FORMAT, FORMAT_VERSION, "refined-cameras")
     try:
-        with np.load(p, allow_pickle=False) as z:
-            if str(z["format"]) != CAMERAS_FORMAT or int(z["version"]) != FORMAT_VERSION:
-                raise EigsError(p, f"not a {CAMERAS_FORMAT} v{FORMAT_VERSION} file")
-            cameras = RefinedCameras(method=str(z["method"]), before=z["before"], after=z["after"],
-                                     twist=z["twist"], views=z["views"])  # fmt: skip
-    except FileNotFoundError:
-        raise EigsError(p, "no refined-cameras file") from None
-    except (OSError, ValueError, KeyError, zipfile.BadZipFile) as err:
-        raise EigsError(p, f"unreadable refined-cameras file ({err})") from None
+        cameras = RefinedCameras(method=str(z["method"]), before=z["before"], after=z["after"], twist=z["twist"],
+                                 views=z["views"])  # fmt: skip
+    except KeyError as err:
+        raise EigsError(p, f"unreadable refined-cameras file (no {err})") from None
     cameras.validate(p)
     return cameras

@@ -20,15 +20,13 @@ methods); read by evaluation, which scores it against the ground-truth camera mo
 from __future__ import annotations
 
 import os
-import zipfile
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
+from eigs.artifacts._npz import read_npz, write_npz
 from eigs.artifacts.run import MOTION
 from eigs.errors import EigsError
-from eigs.util.atomic import atomic_path
 
 MOTION_FORMAT = "eigs-motion"
 FORMAT_VERSION = 1
@@ -74,8 +72,6 @@ def sample_indices(n: int, seed: int = 0) -> np.ndarray:
 def write_motion(motion: RunMotion, path: str | os.PathLike) -> None:
     motion.validate(path)
     arrays = {
-        "format": np.array(MOTION_FORMAT),
-        "version": np.array(FORMAT_VERSION),
         "method": np.array(motion.method),
         "points": motion.points.astype(np.float32),
         "displacement": motion.displacement.astype(np.float32),
@@ -84,30 +80,18 @@ def write_motion(motion: RunMotion, path: str | os.PathLike) -> None:
     }
     if motion.camera_c2w is not None:
         arrays["camera_c2w"] = motion.camera_c2w.astype(np.float64)
-    with atomic_path(path) as tmp, open(tmp, "wb") as f:
-        np.savez(f, **arrays)
+    write_npz(path, MOTION_FORMAT, FORMAT_VERSION, arrays)
 
 
 def read_motion(path: str | os.PathLike) -> RunMotion:
     """Read a run's ``motion.npz`` (or the run folder holding it)."""
-    p = Path(path)
-    if p.is_dir():
-        p = p / FILE_NAME
+    p, z = read_npz(path, FILE_NAME, MOTION_FORMAT, FORMAT_VERSION, "motion")
     try:
-        with np.load(p, allow_pickle=False) as z:
-            if str(z["format"]) != MOTION_FORMAT or int(z["version"]) != FORMAT_VERSION:
-                raise EigsError(p, f"not a {MOTION_FORMAT} v{FORMAT_VERSION} file")
-            motion = RunMotion(
-                method=str(z["method"]),
-                points=z["points"],
-                displacement=z["displacement"],
-                reference_c2w=z["reference_c2w"],
-                views=z["views"],
-                camera_c2w=z["camera_c2w"] if "camera_c2w" in z.files else None,
-            )
-    except FileNotFoundError:
-        raise EigsError(p, "no motion file") from None
-    except (OSError, ValueError, KeyError, zipfile.BadZipFile) as err:
-        raise EigsError(p, f"unreadable motion file ({err})") from None
+        motion = RunMotion(
+            method=str(z["method"]), points=z["points"], displacement=z["displacement"],
+            reference_c2w=z["reference_c2w"], views=z["views"], camera_c2w=z.get("camera_c2w"),
+        )  # fmt: skip
+    except KeyError as err:
+        raise EigsError(p, f"unreadable motion file (no {err})") from None
     motion.validate(p)
     return motion

@@ -341,19 +341,28 @@ def _score_brisque(
     return times, path_kind
 
 
+def _ground_truth_to_score(file: Path, scene: Any, timestamps_us: np.ndarray) -> tuple[np.ndarray, str] | None:
+    """The ground-truth poses (V, L, 4, 4) at the latent times and their source, to score the run folder's ``file``
+    (``motion.npz``, ``cameras.npz``) against; None when the run has no such file or the scene no ground truth."""
+    from eigs.scene.truth import latent_poses_at
+
+    if not file.exists():
+        return None
+    got = latent_poses_at(scene, timestamps_us)
+    if got is None:
+        log.info("%s: the scene has no ground-truth poses; %s not scored", file.parent, file.name)
+    return got
+
+
 def motion_metrics(run_dir: Path, scene: Any, timestamps_us: np.ndarray) -> dict[str, Any] | None:
     """The run's motion within the exposures against the ground-truth camera motion (:mod:`eigs.metrics.motion`):
     None when the run models no motion (no ``motion.npz``) or the scene has no ground-truth poses."""
     from eigs.artifacts.motion import read_motion
     from eigs.artifacts.run import MOTION as FILE_NAME
     from eigs.metrics.motion import motion_errors
-    from eigs.scene.truth import latent_poses_at
 
-    if not (run_dir / FILE_NAME).exists():
-        return None
-    got = latent_poses_at(scene, timestamps_us)
+    got = _ground_truth_to_score(run_dir / FILE_NAME, scene, timestamps_us)
     if got is None:
-        log.info("%s: the scene has no ground-truth poses; motion not scored", run_dir)
         return None
     gt, source = got
     m = read_motion(run_dir)
@@ -374,13 +383,9 @@ def camera_metrics(run_dir: Path, scene: Any, timestamps_us: np.ndarray) -> dict
     from eigs.artifacts.cameras import read_refined_cameras
     from eigs.artifacts.run import CAMERAS
     from eigs.metrics.trajectory import extent, trajectory_accuracy
-    from eigs.scene.truth import latent_poses_at
 
-    if not (run_dir / CAMERAS).exists():
-        return None
-    got = latent_poses_at(scene, timestamps_us)
+    got = _ground_truth_to_score(run_dir / CAMERAS, scene, timestamps_us)
     if got is None:
-        log.info("%s: the scene has no ground-truth poses; refined cameras not scored", run_dir)
         return None
     gt, source = got
     cams = read_refined_cameras(run_dir)
