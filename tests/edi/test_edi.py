@@ -173,6 +173,9 @@ def test_errors_and_mode_selection():
     with pytest.raises(EigsError, match="--exposure-us"):
         compute_edi(_scene(blur, events=ev), EdiOptions(show_progress=False))
     assert resolve_mode(_scene(blur, source="e2nerf-synthetic:/d"), "auto") == "e2nerf"
+    assert resolve_mode(_scene(blur, source="e2nerf-real:/d"), "auto") == "e2nerf"
+    # a built-in scene with E²NeRF's blur synthesis has our simulator's events: the estimated threshold, not c = 0.3
+    assert resolve_mode(_scene(blur, source="eigs synth --scene chair (seed 0, blur e2nerf)"), "auto") == "estimated"
     assert resolve_mode(_scene(blur, source="aedat4:/d"), "auto") == "estimated"
     assert resolve_mode(_scene(blur, source="aedat4:/d"), "e2nerf") == "e2nerf"
     with pytest.raises(EigsError, match="--mode"):

@@ -42,9 +42,12 @@ FALLBACK_C = 0.2  # threshold when nothing can be estimated (no view has events)
 
 
 def is_e2nerf_scene(scene: Scene) -> bool:
-    """Scenes ingested from E²NeRF layouts: the ``source`` attribute names E²NeRF, or the events come pre-binned
-    without raw timestamps (only E²NeRF's ``events.pt`` provides that)."""
-    if "e2nerf" in scene.source.lower().replace("²", "2").replace("-", "").replace("_", ""):
+    """Scenes ingested from E²NeRF layouts: the ``source`` attribute starts with E²NeRF's name (``eigs ingest`` writes
+    ``e2nerf-synthetic:<folder>`` and ``e2nerf-real:<folder>``), or the events come pre-binned without raw timestamps
+    (only E²NeRF's ``events.pt`` provides that). A source that only mentions E²NeRF later is not one: a built-in
+    scene whose blur is made as E²NeRF made its blur (``eigs synth … (seed 0, blur e2nerf)``) has our simulator's
+    events and thresholds, and E²NeRF's fixed c = 0.3 would deblur it with the wrong threshold."""
+    if scene.source.lower().replace("²", "2").replace("-", "").replace("_", "").startswith("e2nerf"):
         return True
     return scene.binned is not None and scene.events is None
 
