@@ -153,7 +153,7 @@ def main() -> None:
              g["gaussians_end"]] for n, g in got.items()]  # fmt: skip
     body = (
         f"Scene `{scene}` ({data.width}×{data.height}, B = {args.bins}, each run's own options and budget, "
-        f"{args.threads} threads; `bench/densify_stats.py`). Per Gaussian, the mean over its visible steps of a "
+        f"{args.threads} thread(s); `bench/densify_stats.py`). Per Gaussian, the mean over its visible steps of a "
         "refinement window of the screen-space gradient in NDC: ‖Σ g‖ (summed over the step's renders, then the "
         "norm: what densification uses), Σ ‖g‖ (each render's norm, summed) and max ‖g‖ (the largest render's). "
         "'% above': the share of the window's seen Gaussians above `grow_grad2d` (5e-4), what the refinement grows "
