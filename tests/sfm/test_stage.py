@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 
@@ -116,9 +117,10 @@ def test_self_check_drops_a_failed_view_and_stops_on_a_broken_path(scene8, tmp_p
         out.failed_views = [3]
         return out
 
+    on = SfmConfig(mode="colmap", register_test_cameras=False)
     monkeypatch.setattr(sc, "self_check", one_view_off)
     out = tmp_path / "dropped"
-    rep = run_sfm(scene8["scene"], scene8["edi"], out, cfg=SfmConfig(mode="colmap", register_test_cameras=False))
+    rep = run_sfm(scene8["scene"], scene8["edi"], out, cfg=on)
     poses = read_poses(out)
     assert not poses.valid[3].any() and poses.valid[np.arange(8) != 3].all()
     assert rep["registration"]["dropped_by_self_check"] == [3] and 3 in rep["registration"]["views_without_all_poses"]
@@ -131,10 +133,9 @@ def test_self_check_drops_a_failed_view_and_stops_on_a_broken_path(scene8, tmp_p
     monkeypatch.setattr(sc, "self_check", broken)
     out = tmp_path / "stopped"
     with pytest.raises(EigsError, match=r"SfM self-check failed: the camera path breaks.*self_check: false"):
-        run_sfm(scene8["scene"], scene8["edi"], out, cfg=SfmConfig(mode="colmap", register_test_cameras=False))
+        run_sfm(scene8["scene"], scene8["edi"], out, cfg=on)
     assert not out.exists()
-    off = SfmConfig(mode="colmap", self_check=False, register_test_cameras=False)
-    rep = run_sfm(scene8["scene"], scene8["edi"], out, cfg=off)
+    rep = run_sfm(scene8["scene"], scene8["edi"], out, cfg=dataclasses.replace(on, self_check=False))
     assert rep["self_check"]["passed"] is False and rep["self_check"]["enforced"] is False
     assert read_poses(out).valid.all()
 

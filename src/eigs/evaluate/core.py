@@ -400,11 +400,10 @@ def camera_metrics(run_dir: Path, scene: Any, timestamps_us: np.ndarray) -> dict
         return None
     ext = extent(gt0[use][:, :3, 3])
     out: dict[str, Any] = {"ground_truth": source, "views": int(use.sum())}
+    keys = ("ate_percent_of_extent", "rotation_error_deg_median", "rotation_error_deg_max")
     for name, c2w in (("before", cams.before), ("after", cams.after)):
-        acc = trajectory_accuracy(c2w[use], gt0[use], gt_extent=ext)
-        out[name] = {"ate_percent_of_extent": finite_or_none(acc.ate_percent),
-                     "rotation_error_deg_median": finite_or_none(float(np.median(acc.rotation_errors_deg))),
-                     "rotation_error_deg_max": finite_or_none(float(acc.rotation_errors_deg.max()))}  # fmt: skip
+        acc = trajectory_accuracy(c2w[use], gt0[use], gt_extent=ext).summary()
+        out[name] = {k: finite_or_none(acc[k]) for k in keys}
     turn = np.linalg.norm(cams.twist[use, :3], axis=1)
     out["correction_deg_median"] = float(np.degrees(np.median(turn)))
     return out
