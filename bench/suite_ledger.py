@@ -175,6 +175,10 @@ def option_changes(root: Path, cfg: dict, job: Job) -> str:
         have = json.loads(run_config.read_text())["train"]
     except (OSError, ValueError, KeyError, TypeError) as err:
         raise LedgerError(f"{run_config}: cannot read the run's options ({err})") from None
+    # a key the run's config.json lacks was added to TrainConfig after the run: the run had its default's behaviour
+    from eigs.train.config import TrainConfig
+
+    have = {**{k: v for k, v in TrainConfig().to_dict().items() if k not in have}, **have}
     keys = sorted(k for k in set(want) | set(have) if want.get(k) != have.get(k))
     return ", ".join(f"{k} {have.get(k)} → {want.get(k)}" for k in keys)
 

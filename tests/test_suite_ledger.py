@@ -266,6 +266,26 @@ def test_a_changed_budget_makes_the_runs_stale_until_pruned_and_rerun(workflow, 
     assert not (ledger / "results/alpha/b4/3dgs").exists()
 
 
+def test_a_run_older_than_an_option_has_its_default_and_is_stale_only_when_the_config_sets_another(
+    workflow, tmp_path, capsys
+):
+    """A run's config.json written before a TrainConfig key existed lacks it: the run had the default's behaviour."""
+    cfg, d = workflow
+    ledger = tmp_path / "ledger"
+    assert ledger_main("save", "--directory", d, "--config", cfg, "--ledger", ledger, capsys=capsys)[0] == 0
+    for config_json in (ledger / "results").glob("*/b4/*/config.json"):
+        doc = json.loads(config_json.read_text())
+        del doc["train"]["grow_grad2d_renders"]
+        config_json.write_text(json.dumps(doc))
+    changed = yaml.safe_load(cfg.read_text())
+    assert suite_ledger.stale_jobs(changed, ledger) == {}
+    changed["runs"]["3dgs"]["options"]["grow_grad2d_renders"] = "norm_sum"
+    assert suite_ledger.stale_jobs(changed, ledger) == {
+        f"{rule}:{scene}:3dgs": "grow_grad2d_renders vector_sum → norm_sum"
+        for rule in ("train", "evaluate") for scene in ("alpha", "beta")
+    }
+
+
 def test_ledger_is_a_run_for_suite_report_and_eigs_tables(workflow, tmp_path, capsys, monkeypatch):
     cfg, d = workflow
     ledger = tmp_path / "ledger"

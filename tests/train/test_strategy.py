@@ -5,9 +5,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 import torch
 
 from eigs.artifacts.gaussians import GaussianCloud
+from eigs.errors import EigsError
 from eigs.train.config import TrainConfig
 from eigs.train.gaussian.model import GaussianModel, make_optimizer
 from eigs.train.gaussian.strategy import DensifyStrategy, quat_to_rotmat, remap_gaussians
@@ -110,6 +112,46 @@ def test_gradient_statistics_in_ndc_and_counted_once_per_step():
     strat.after_backward(model, [info, info])  # two renders in one step: gradients summed, counted once
     torch.testing.assert_close(strat.grad2d, torch.tensor([2 * 100.0, 2 * 50.0, 0.0]))
     torch.testing.assert_close(strat.count, torch.tensor([1.0, 1.0, 0.0]))
+
+
+def _info(grad: list[list[float]], visible: list[bool]) -> dict:
+    m2d = torch.zeros(len(grad), 2, requires_grad=True)
+    m2d.grad = torch.tensor(grad)
+    radii = torch.tensor([[int(v)] * 2 for v in visible], dtype=torch.int32)
+    return {"means2d": m2d, "radii": radii}
+
+
+def test_renders_that_pull_apart_cancel_in_the_vector_sum_not_in_the_norm_sum():
+    """Three renders of one step, in pixels, W/2 = 100 and H/2 = 50: Gaussian 0 pulled (3, 4) then (−3, −4) then
+    (0, 0) (cancels), Gaussian 1 (1, 0) three times (agrees), Gaussian 2 seen only in the last render (0, 2)."""
+    model = _model(n=3)
+    renders = [
+        _info([[3.0, 4.0], [1.0, 0.0], [0.0, 0.0]], [True, True, False]),
+        _info([[-3.0, -4.0], [1.0, 0.0], [0.0, 0.0]], [True, True, False]),
+        _info([[0.0, 0.0], [1.0, 0.0], [0.0, 2.0]], [True, True, True]),
+    ]
+    stats = {}
+    for mode in ("vector_sum", "norm_sum"):
+        strat = DensifyStrategy(TrainConfig(grow_grad2d_renders=mode), extent=1.0, width=200, height=100)
+        strat.after_backward(model, renders)
+        torch.testing.assert_close(strat.count, torch.tensor([1.0, 1.0, 1.0]))
+        stats[mode] = strat.grad2d
+    ndc0 = math.hypot(3 * 100.0, 4 * 50.0)  # one render's pull on Gaussian 0, in NDC-scaled units
+    torch.testing.assert_close(stats["vector_sum"], torch.tensor([0.0, 300.0, 100.0]))
+    torch.testing.assert_close(stats["norm_sum"], torch.tensor([2 * ndc0, 300.0, 100.0]))
+
+
+def test_a_non_finite_render_gradient_adds_nothing_in_either_statistic():
+    model = _model(n=2)
+    for mode in ("vector_sum", "norm_sum"):
+        strat = DensifyStrategy(TrainConfig(grow_grad2d_renders=mode), extent=1.0, width=200, height=100)
+        strat.after_backward(model, [_info([[math.nan, 0.0], [1.0, 0.0]], [True, True])] * 2)
+        torch.testing.assert_close(strat.grad2d, torch.tensor([0.0, 200.0]))
+
+
+def test_the_render_statistic_is_a_checked_choice():
+    with pytest.raises(EigsError, match="grow_grad2d_renders"):
+        TrainConfig.from_dict({"grow_grad2d_renders": "max"})
 
 
 def test_quat_to_rotmat_is_orthonormal():

@@ -13,7 +13,9 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
-from eigs.util.options import Options, parse_config_json
+from eigs.util.options import Options, choice, parse_config_json
+
+GROW_GRAD2D_RENDERS = ("vector_sum", "norm_sum")
 
 
 @dataclass(frozen=True)
@@ -53,6 +55,11 @@ class TrainConfig(Options):
     refine_every: int = 100
     reset_every: int = 0  # opacity reset every this many steps (0 = never: measured better for short runs)
     grow_grad2d: float = 5e-4
+    # how a step that renders several images (EiGS's B + 1 latent renders, a trajectory's sub-frames) adds up their
+    # screen-space gradients per Gaussian: "vector_sum", the norm of the summed vectors (3DGS's statistic: the renders'
+    # pulls cancel where they disagree), or "norm_sum", the sum of each render's norm (no cancellation between
+    # renders). The same for one render. docs/training.md "Densification"
+    grow_grad2d_renders: str = choice("vector_sum", GROW_GRAD2D_RENDERS)
     grow_scale3d: float = 0.01
     prune_opacity: float = 1e-2
     prune_scale3d: float = 0.1

@@ -7,9 +7,11 @@ opacities. Every change remaps the Adam state row by row: kept rows keep their m
 children start at zero.
 
 Units: the rasterizer's ``means2d`` gradient is in pixels; 3DGS's threshold is in NDC, so the gradient is scaled by
-W/2 in x and H/2 in y. A step that renders several images (EiGS: N+1 moved copies) sums their ``means2d`` gradients
-per Gaussian before taking the norm and counts the step once for a Gaussian visible in any of them, so a step has
-the same weight whatever the number of renders.
+W/2 in x and H/2 in y. A step that renders several images (EiGS: N+1 moved copies) counts once for a Gaussian
+visible in any of them, so a step has the same weight whatever the number of renders; its statistic per Gaussian is
+``grow_grad2d_renders``: the norm of the renders' summed ``means2d`` gradients (``vector_sum``, 3DGS's statistic) or
+the sum of each render's norm (``norm_sum``: the renders' pulls do not cancel where they disagree; equal to
+``vector_sum`` when they agree, and for one render).
 """
 
 from __future__ import annotations
@@ -118,17 +120,23 @@ class DensifyStrategy:
         if self.grad2d is None or self.grad2d.shape[0] != n:
             self.grad2d = torch.zeros(n)
             self.count = torch.zeros(n)
-        g = torch.zeros(n, 2)
+        half = torch.tensor(self.half, dtype=torch.float32)
+        per_render = self.cfg.grow_grad2d_renders == "norm_sum"
+        g = torch.zeros(n, 2)  # (N, 2) summed pixel gradients
+        norm_sum = torch.zeros(n)  # (N,) summed per-render NDC norms
         visible = torch.zeros(n, dtype=torch.bool)
         for info in infos:
             m2d = info["means2d"]
             if m2d.grad is None:
                 continue
-            g += m2d.grad.detach().reshape(n, 2).to(torch.float32).cpu()
+            g_render = m2d.grad.detach().reshape(n, 2).to(torch.float32).cpu()  # (N, 2) px
+            g += g_render
+            if per_render:
+                norm_sum += (g_render * half).norm(dim=-1)
             visible |= (info["radii"].reshape(n, -1) > 0).any(dim=-1).cpu()
         g[:, 0] *= self.half[0]
         g[:, 1] *= self.half[1]
-        norm = g.norm(dim=-1)
+        norm = norm_sum if per_render else g.norm(dim=-1)
         norm = torch.where(torch.isfinite(norm), norm, torch.zeros_like(norm))
         self.grad2d += torch.where(visible, norm, torch.zeros_like(norm))
         self.count += visible.to(torch.float32)  # type: ignore[operator]
