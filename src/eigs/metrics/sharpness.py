@@ -51,16 +51,21 @@ def band_mask(height: int, width: int, cutoff: float = CUTOFF) -> np.ndarray:
     return np.hypot(fx, fy) >= cutoff
 
 
-def band_power(y: np.ndarray, cutoff: float = CUTOFF) -> float:
-    """Band power ``P`` (module docstring) of a luminance image ``y`` ``(H, W)``: variance per pixel above
-    ``cutoff`` cycles/pixel after mean removal and the Hann window, in [0, 1]² units."""
+def _band_spectrum(y: np.ndarray, cutoff: float) -> tuple[np.ndarray, float]:
+    """The DFT bins of ``y`` ``(H, W)`` in the band (mean removed, Hann window) and the normalisation ``H W Σ w²``."""
     h, w = y.shape
     if min(h, w) < MIN_SIZE:
         raise EigsError(None, f"image is {w}x{h}; the sharpness ratio needs at least {MIN_SIZE} pixels per side")
     window = np.outer(np.hanning(h), np.hanning(w))
     spectrum = np.fft.fft2((y - y.mean()) * window)
-    power = spectrum.real**2 + spectrum.imag**2
-    return float(power[band_mask(h, w, cutoff)].sum() / (h * w * float(np.sum(window**2))))
+    return spectrum[band_mask(h, w, cutoff)], h * w * float(np.sum(window**2))
+
+
+def band_power(y: np.ndarray, cutoff: float = CUTOFF) -> float:
+    """Band power ``P`` (module docstring) of a luminance image ``y`` ``(H, W)``: variance per pixel above
+    ``cutoff`` cycles/pixel after mean removal and the Hann window, in [0, 1]² units."""
+    band, norm = _band_spectrum(y, cutoff)
+    return float(np.sum(band.real**2 + band.imag**2) / norm)
 
 
 def hf_ratio(img: np.ndarray, ref: np.ndarray, cutoff: float = CUTOFF) -> float:
@@ -79,3 +84,24 @@ def hf_ratio(img: np.ndarray, ref: np.ndarray, cutoff: float = CUTOFF) -> float:
             f"{MIN_BAND_POWER:g}): the sharpness ratio is undefined",
         )
     return band_power(luminance(a), cutoff) / p_ref
+
+
+def hf_coherence(img: np.ndarray, ref: np.ndarray, cutoff: float = CUTOFF) -> float:
+    """The part of ``ref``'s high-frequency content that ``img`` reproduces: ``Re Σ F_img conj(F_ref) / Σ |F_ref|²``
+    over the band of :func:`hf_ratio` (same luminance, mean removal and window). 1: the ground truth's detail, in
+    phase and at full amplitude; ``a`` for a render whose detail is the ground truth's times ``a``; about 0 for a
+    flat render or for detail uncorrelated with the ground truth (noise, misplaced texture); negative where it is in
+    counter-phase. Unlike the power ratio, noise does not raise it, so the two together separate detail kept
+    (coherence) from power added (``hf_ratio − coherence²``: at least the power of the band that the ground truth
+    does not explain, by Cauchy-Schwarz at most ``hf_ratio``). Inputs and errors as :func:`hf_ratio`."""
+    a, b = float_pair(img, ref)
+    band_ref, norm = _band_spectrum(luminance(b), cutoff)
+    p_ref = float(np.sum(band_ref.real**2 + band_ref.imag**2) / norm)
+    if p_ref < MIN_BAND_POWER:
+        raise UndefinedSharpness(
+            None,
+            f"the reference has no power above {cutoff} cycles/pixel (band variance {p_ref:.3g} < "
+            f"{MIN_BAND_POWER:g}): the high-frequency coherence is undefined",
+        )
+    band_img, _ = _band_spectrum(luminance(a), cutoff)
+    return float(np.sum(band_img.real * band_ref.real + band_img.imag * band_ref.imag) / norm) / p_ref
