@@ -5,15 +5,20 @@ At 346×260 `eigs+`'s novel views keep a tenth of the ground truth's power above
 keeps a third (docs/results.md). The candidates, one variant each, all on the scene's own EDI, init and budgets:
 
 - ``eigs+``, ``edi-3dgs``: the runs as the config defines them (SfM poses);
-- ``eigs+-norms``: densification by the sum of the renders' gradient norms (``grow_grad2d_renders: norm_sum``): is
-  it the Gaussians the blur average does not grow?
 - ``eigs+-gt``, ``edi-3dgs-gt``: the scene's ground-truth latent poses instead of SfM's (``eigs sfm --mode given``;
   init from those poses, evaluated at their test cameras): is it the motion the renders are moved by? The EiGS blur
   average moves its N + 1 renders by the latent poses' relative motion (plus the ADE's residual); where that motion
   is off by a fraction of the blur length, an average of sharp renders cannot match the frame and a smoother scene
-  fits it better;
-- ``eigs+-latent2``: ``latent_weight`` 2 instead of 0.5: is it the weight of the sharp EDI frames against the blur?
-- ``eigs+-noade``: no ADE (the renders moved by the latent poses alone): is it the ADE's displacements?
+  fits it better. With ground-truth poses the renders are registered to their ground truth, so the coherence reads.
+
+Then, each on ``eigs+-gt`` (ground-truth poses, so that neither the poses nor the test cameras' registration enter):
+
+- ``-norms``: densification by the sum of the renders' gradient norms (``grow_grad2d_renders: norm_sum``): is it
+  the Gaussians the blur average does not grow?
+- ``-noevent``: no event-integration loss: is it the events (noisy at the preset's light level)?
+- ``-latent2``: ``latent_weight`` 2 instead of 0.5: is it the weight of the sharp EDI frames against the blur?
+- ``-noade``: no ADE (the renders at the latent poses; without the ADE there is no residual to regularise, so no
+  consistency loss either): is it the ADE's displacements?
 
 Each variant is trained and evaluated by the CLI (``eigs train``, ``eigs evaluate`` with the scene's flags from the
 config) into ``--work`` (default ``results/bench/blur_cause/<scene>``; a finished variant is not retrained). Reported:
@@ -45,11 +50,13 @@ from bench._report import add_out_argument, table, write_section  # noqa: E402
 VARIANTS: dict[str, tuple[str, dict, str]] = {
     "edi-3dgs": ("edi-3dgs", {}, "sfm"),
     "eigs+": ("eigs+", {}, "sfm"),
-    "eigs+-norms": ("eigs+", {"grow_grad2d_renders": "norm_sum"}, "sfm"),
     "edi-3dgs-gt": ("edi-3dgs", {}, "given"),
     "eigs+-gt": ("eigs+", {}, "given"),
-    "eigs+-latent2": ("eigs+", {"method_options": {"latent_weight": 2.0}}, "sfm"),
-    "eigs+-noade": ("eigs+", {"method_options": {"ade": False}}, "sfm"),
+    "eigs+-gt-norms": ("eigs+", {"grow_grad2d_renders": "norm_sum"}, "given"),
+    "eigs+-gt-noevent": ("eigs+", {"method_options": {"event_loss": "none"}}, "given"),
+    "eigs+-gt-latent2": ("eigs+", {"method_options": {"latent_weight": 2.0}}, "given"),
+    "eigs+-gt-noade": ("eigs+", {"method_options": {"ade": False, "pose_prior": False, "consistency": False}},
+                       "given"),
 }
 
 
