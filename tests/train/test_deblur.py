@@ -181,6 +181,28 @@ def test_discrete_blur_target_follows_the_latent_average(data):
         _method(data, "eigs", blur_target="discrete", subframes=2)
 
 
+def test_discrete_floor_decides_which_dark_pixels_keep_the_blurry_frame(data):
+    """Latents lin(L_k) = 1.1 · lin(B) (ratio 1.1, inside the band everywhere): pixels darker than the floor keep the
+    frame, the others take 1.1 · lin(B); a floor of 0 corrects every pixel with light."""
+    import dataclasses
+
+    from eigs.losses.events import from_linear, to_linear
+
+    resp = data.camera_response
+    lin_b = to_linear(data.blurry, resp)
+    lat = from_linear((lin_b * 1.1).clamp(max=1.0)[:, None].expand_as(data.latent), resp)
+    d2 = dataclasses.replace(data, latent=lat)
+    for floor in (0.0, 0.02, 0.2):
+        target = to_linear(_method(d2, "eigs", blur_target="discrete", discrete_floor=floor).method.blurry, resp)
+        dark, lit = lin_b <= floor, (lin_b > floor) & (lin_b * 1.1 < 1.0) & (lin_b > 0)
+        assert bool(lit.any())
+        torch.testing.assert_close(target[dark], lin_b[dark], atol=2e-6, rtol=0)
+        torch.testing.assert_close(target[lit], 1.1 * lin_b[lit], atol=2e-5, rtol=1e-4)
+    assert bool((lin_b <= 0.2).any()) and bool((lin_b > 0.2).any())
+    with pytest.raises(EigsError, match="discrete_floor"):
+        _method(data, "eigs", blur_target="discrete", discrete_floor=-0.1)
+
+
 def test_zero_last_layer_starts_without_displacement(data):
     m = _method(data, "eigs", ade_zero_last=True).method
     x = torch.randn(30, 3)

@@ -93,13 +93,14 @@ class MultiRender(Method):
         """(V, H, W, C) blur targets for the N+1-sample average: the EDI latent frames averaged in linear intensity
         with the blur weights. EDI's latents average to the blurry frame over the continuous exposure, so this is
         the blurry frame times the per-pixel ratio of the discrete to the continuous exposure average that the events
-        imply. Where that ratio leaves [2/3, 3/2] (dark or clipped pixels) the blurry frame is kept."""
+        imply. Where that ratio leaves [2/3, 3/2] (clipped pixels, noise) or the frame is darker than
+        ``discrete_floor`` the blurry frame is kept."""
         d = self.data
         w = self.blur_weights(d.n_latent).reshape(1, -1, 1, 1, 1)
         disc = (to_linear(d.latent, self.response) * w).sum(dim=1)  # (V, H, W, C)
         blur = to_linear(d.blurry, self.response)
         ratio = disc / blur.clamp_min(1e-6)
-        keep = (blur > 0.02) & (ratio > 2 / 3) & (ratio < 1.5)
+        keep = (blur > self.o.discrete_floor) & (ratio > 2 / 3) & (ratio < 1.5)
         return torch.where(keep, from_linear(disc, self.response), d.blurry).clamp(0.0, 1.0)
 
     # ------------------------------------------------------------------ registry hooks

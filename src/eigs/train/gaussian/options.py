@@ -61,6 +61,9 @@ class MultiRenderOptions(Options):
     # events: the average of EDI's latent frames with the same weights, which equals the continuous exposure
     # average of the frame; docs/methods.md)
     blur_target: str = "blurry"
+    # the discrete target keeps the blurry frame where it is darker than this (linear intensity, [0, 1]); the ratio
+    # test ([2/3, 3/2]) applies everywhere. 0.02 (5 of 255): the value the ledgers were made with
+    discrete_floor: float = 0.02
     # beyond the paper: L1 between each latent render k and EDI's latent frame k, with this weight (0: off); the
     # event-integration loss constrains only differences of consecutive renders, this ties each render to the frame
     # the events and the blurry frame imply for its time (no extra renders)
@@ -81,6 +84,7 @@ class MultiRenderOptions(Options):
             (self.blur_target in ("blurry", "discrete") and (self.blur_target == "blurry" or self.subframes == 1),
              "blur_target must be blurry or discrete (discrete needs subframes 1)"),
             (self.latent_weight >= 0, "latent_weight must be >= 0"),
+            (0 <= self.discrete_floor < 1, "discrete_floor must lie in [0, 1)"),
         ]  # fmt: skip
         return [msg for ok, msg in checks if not ok]
 
