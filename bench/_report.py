@@ -12,6 +12,9 @@ import json
 import os
 import platform
 import re
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "benchmarks.md"
@@ -40,6 +43,17 @@ def machine() -> str:
     except ImportError:
         tv = ""
     return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}{tv}"
+
+
+def timed(cmd: list[str], log: Path) -> float:
+    """Wall seconds of ``cmd`` (its output to ``log``); a failure stops the script with the log's tail."""
+    t = time.perf_counter()
+    with log.open("w") as f:
+        proc = subprocess.run(cmd, stdout=f, stderr=subprocess.STDOUT, check=False)
+    if proc.returncode != 0:
+        script = Path(sys.argv[0]).name
+        raise SystemExit(f"{script}: {' '.join(cmd[:3])} failed ({log}):\n{log.read_text()[-2000:]}")
+    return time.perf_counter() - t
 
 
 def add_out_argument(ap: argparse.ArgumentParser) -> None:

@@ -39,16 +39,13 @@ from __future__ import annotations
 import argparse
 import copy
 import json
-import shlex
-import subprocess
 import sys
-import time
 from pathlib import Path
 
 import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from bench._report import add_out_argument, table, write_section  # noqa: E402
+from bench._report import add_out_argument, table, timed, write_section  # noqa: E402
 
 # name → (the config's run it changes, options merged into that run's options, poses: "sfm" or "given")
 VARIANTS: dict[str, tuple[str, dict, str]] = {
@@ -76,24 +73,14 @@ def run_options(spec: dict, patch: dict) -> dict:
     return {"method": spec["method"], **opts}
 
 
-def sh(cmd: list[str], log: Path) -> float:
-    """Run ``cmd`` with its output in ``log``; seconds. A failure stops the script naming the log."""
-    t0 = time.perf_counter()
-    with log.open("w") as f:
-        code = subprocess.call(cmd, stdout=f, stderr=subprocess.STDOUT)
-    if code:
-        sys.exit(f"blur_cause: {shlex.join(cmd[:2])} failed (exit {code}); see {log}")
-    return time.perf_counter() - t0
-
-
 def given_upstream(results: Path, bins: int, work: Path, threads: int) -> tuple[Path, Path]:
     """SfM folder and init of the scene's ground-truth latent poses (``eigs sfm --mode given``), made once."""
     sfm, init = work / "sfm-given", work / "init-given.ply"
     if not init.is_file():
         b = results / f"b{bins}"
-        sh(["eigs", "sfm", str(results / "scene.h5"), str(b / "edi.h5"), "--latent-dir", str(b / "latent"), "-o",
+        timed(["eigs", "sfm", str(results / "scene.h5"), str(b / "edi.h5"), "--latent-dir", str(b / "latent"), "-o",
             str(sfm), "--mode", "given", "--threads", str(threads)], work / "sfm-given.log")  # fmt: skip
-        sh(["eigs", "init", str(sfm), "-o", str(init)], work / "init-given.log")
+        timed(["eigs", "init", str(sfm), "-o", str(init)], work / "init-given.log")
     return sfm, init
 
 
@@ -101,12 +88,12 @@ def render_coherence(renders: Path) -> float | None:
     """Mean high-frequency coherence (``eigs.metrics.sharpness.hf_coherence``) of the novel-view renders in an
     evaluation's ``renders/`` against its ``gt_novel/`` (None without them)."""
     import numpy as np
-    from PIL import Image
 
+    from eigs.metrics.image import read_image
     from eigs.metrics.sharpness import hf_coherence
 
     pairs = [(f, renders / "gt_novel" / f.name) for f in sorted((renders / "novel").glob("*.png"))]
-    got = [hf_coherence(np.asarray(Image.open(a)), np.asarray(Image.open(b))) for a, b in pairs if b.is_file()]
+    got = [hf_coherence(read_image(a), read_image(b)) for a, b in pairs if b.is_file()]
     return float(np.mean(got)) if got else None
 
 
@@ -119,11 +106,11 @@ def measure(name: str, results: Path, cfg: dict, bins: int, work: Path, threads:
     run_dir, metrics = work / name, work / "eval" / name / "metrics.json"  # beside it: per_image.csv, renders/
     options = run_options(cfg["runs"][base], patch)
     if not metrics.is_file():
-        sh(["eigs", "train", str(results / "scene.h5"), str(b / "edi.h5"), str(sfm), str(init), "-o", str(run_dir),
+        timed(["eigs", "train", str(results / "scene.h5"), str(b / "edi.h5"), str(sfm), str(init), "-o", str(run_dir),
             "--config", json.dumps(options), "--threads", str(threads)], work / f"{name}.train.log")  # fmt: skip
         flags = plan.evaluate_flags(cfg, results.name)
         metrics.parent.mkdir(parents=True, exist_ok=True)
-        sh(["eigs", "evaluate", str(run_dir), str(results / "scene.h5"), str(sfm), "-o", str(metrics), *flags,
+        timed(["eigs", "evaluate", str(run_dir), str(results / "scene.h5"), str(sfm), "-o", str(metrics), *flags,
             "--threads", str(threads)], work / f"{name}.evaluate.log")  # fmt: skip
     m = json.loads(metrics.read_text())
     novel = m["metrics"]["novel"]

@@ -31,7 +31,6 @@ import dataclasses
 import json
 import os
 import statistics
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -40,7 +39,7 @@ import torch
 import torch.nn.functional as F
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from bench._report import add_out_argument, machine  # noqa: E402
+from bench._report import add_out_argument, machine, timed  # noqa: E402
 from bench.device_batch import merged_config  # noqa: E402
 from bench.train import resized_cloud  # noqa: E402
 from eigs.train.config import TrainConfig  # noqa: E402
@@ -152,16 +151,6 @@ def parse_shape(text: str) -> tuple[int, int, int]:
         raise SystemExit(f"cost.py: --shapes: {text!r} is not WxH:V (V >= 2 training views)")
     w, h = parse_size(size)
     return w, h, int(views)
-
-
-def timed(cmd: list[str], log: Path) -> float:
-    """Wall seconds of ``cmd`` (its output to ``log``); a failure stops the script with the log's tail."""
-    t = time.perf_counter()
-    with log.open("w") as f:
-        proc = subprocess.run(cmd, stdout=f, stderr=subprocess.STDOUT, check=False)
-    if proc.returncode != 0:
-        raise SystemExit(f"cost.py: {' '.join(cmd[:3])} failed ({log}):\n{log.read_text()[-2000:]}")
-    return time.perf_counter() - t
 
 
 def upstream(args: argparse.Namespace) -> None:

@@ -68,6 +68,20 @@ def band_power(y: np.ndarray, cutoff: float = CUTOFF) -> float:
     return float(np.sum(band.real**2 + band.imag**2) / norm)
 
 
+def _reference_band(ref: np.ndarray, cutoff: float, figure: str) -> tuple[np.ndarray, float, float]:
+    """The band bins, normalisation and band power of a ground truth's luminance ``ref``; raises
+    :class:`UndefinedSharpness` (naming ``figure``) when the power is below :data:`MIN_BAND_POWER`."""
+    band, norm = _band_spectrum(ref, cutoff)
+    power = float(np.sum(band.real**2 + band.imag**2) / norm)
+    if power < MIN_BAND_POWER:
+        raise UndefinedSharpness(
+            None,
+            f"the reference has no power above {cutoff} cycles/pixel (band variance {power:.3g} < "
+            f"{MIN_BAND_POWER:g}): the {figure} is undefined",
+        )
+    return band, norm, power
+
+
 def hf_ratio(img: np.ndarray, ref: np.ndarray, cutoff: float = CUTOFF) -> float:
     """High-frequency power ratio of ``img`` (a render) against ``ref`` (its ground truth): ``P(img) / P(ref)``.
 
@@ -76,13 +90,7 @@ def hf_ratio(img: np.ndarray, ref: np.ndarray, cutoff: float = CUTOFF) -> float:
     power is below :data:`MIN_BAND_POWER` (a flat ground truth).
     """
     a, b = float_pair(img, ref)
-    p_ref = band_power(luminance(b), cutoff)
-    if p_ref < MIN_BAND_POWER:
-        raise UndefinedSharpness(
-            None,
-            f"the reference has no power above {cutoff} cycles/pixel (band variance {p_ref:.3g} < "
-            f"{MIN_BAND_POWER:g}): the sharpness ratio is undefined",
-        )
+    _, _, p_ref = _reference_band(luminance(b), cutoff, "sharpness ratio")
     return band_power(luminance(a), cutoff) / p_ref
 
 
@@ -95,13 +103,6 @@ def hf_coherence(img: np.ndarray, ref: np.ndarray, cutoff: float = CUTOFF) -> fl
     (coherence) from power added (``hf_ratio − coherence²``: at least the power of the band that the ground truth
     does not explain, by Cauchy-Schwarz at most ``hf_ratio``). Inputs and errors as :func:`hf_ratio`."""
     a, b = float_pair(img, ref)
-    band_ref, norm = _band_spectrum(luminance(b), cutoff)
-    p_ref = float(np.sum(band_ref.real**2 + band_ref.imag**2) / norm)
-    if p_ref < MIN_BAND_POWER:
-        raise UndefinedSharpness(
-            None,
-            f"the reference has no power above {cutoff} cycles/pixel (band variance {p_ref:.3g} < "
-            f"{MIN_BAND_POWER:g}): the high-frequency coherence is undefined",
-        )
+    band_ref, norm, p_ref = _reference_band(luminance(b), cutoff, "high-frequency coherence")
     band_img, _ = _band_spectrum(luminance(a), cutoff)
     return float(np.sum(band_img.real * band_ref.real + band_img.imag * band_ref.imag) / norm) / p_ref

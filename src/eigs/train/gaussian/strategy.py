@@ -120,23 +120,25 @@ class DensifyStrategy:
         if self.grad2d is None or self.grad2d.shape[0] != n:
             self.grad2d = torch.zeros(n)
             self.count = torch.zeros(n)
-        half = torch.tensor(self.half, dtype=torch.float32)
         per_render = self.cfg.grow_grad2d_renders == "norm_sum"
-        g = torch.zeros(n, 2)  # (N, 2) summed pixel gradients
-        norm_sum = torch.zeros(n)  # (N,) summed per-render NDC norms
+        half = torch.tensor(self.half, dtype=torch.float32)
+        g = torch.zeros(n, 2)  # (N, 2) vector_sum: the renders' summed pixel gradients
+        norm = torch.zeros(n)  # (N,) norm_sum: the renders' summed NDC norms
         visible = torch.zeros(n, dtype=torch.bool)
         for info in infos:
             m2d = info["means2d"]
             if m2d.grad is None:
                 continue
             g_render = m2d.grad.detach().reshape(n, 2).to(torch.float32).cpu()  # (N, 2) px
-            g += g_render
             if per_render:
-                norm_sum += (g_render * half).norm(dim=-1)
+                norm += (g_render * half).norm(dim=-1)
+            else:
+                g += g_render
             visible |= (info["radii"].reshape(n, -1) > 0).any(dim=-1).cpu()
-        g[:, 0] *= self.half[0]
-        g[:, 1] *= self.half[1]
-        norm = norm_sum if per_render else g.norm(dim=-1)
+        if not per_render:
+            g[:, 0] *= self.half[0]
+            g[:, 1] *= self.half[1]
+            norm = g.norm(dim=-1)
         norm = torch.where(torch.isfinite(norm), norm, torch.zeros_like(norm))
         self.grad2d += torch.where(visible, norm, torch.zeros_like(norm))
         self.count += visible.to(torch.float32)  # type: ignore[operator]
