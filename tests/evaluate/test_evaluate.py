@@ -83,6 +83,9 @@ def test_metrics_agree_with_eigs_metric_on_the_saved_renders(synthetic, capsys, 
         assert got == pytest.approx(m["lpips_alex"], abs=1e-5)
         assert cli_mean(capsys, "sharpness", r / kind, r / f"gt_{kind}") == pytest.approx(m["sharpness"], rel=1e-6)
         assert m["sharpness_undefined"] == 0 and 0 < m["sharpness"]
+        assert cli_mean(capsys, "coherence", r / kind, r / f"gt_{kind}") == pytest.approx(m["coherence"], rel=1e-6)
+        # Cauchy-Schwarz: the detail kept cannot carry more power than the render has in the band
+        assert m["coherence_undefined"] == 0 and m["coherence"] ** 2 <= m["sharpness"] + 1e-9
 
 
 def test_a_flat_ground_truth_has_no_sharpness_and_is_counted(resources_dir, caplog):
@@ -93,11 +96,16 @@ def test_a_flat_ground_truth_has_no_sharpness_and_is_counted(resources_dir, capl
     textured = score_pair(render, rng.integers(0, 256, (32, 40, 3), dtype=np.uint8), str(resources_dir))
     flat = score_pair(render, np.full((32, 40, 3), 40, dtype=np.uint8), str(resources_dir))
     assert np.isnan(flat["sharpness"]) and np.isfinite(flat["psnr"]) and textured["sharpness"] > 0
+    assert np.isnan(flat["coherence"]) and np.isfinite(textured["coherence"])
+    # the render is itself its ground truth: all of the detail, in phase
+    assert score_pair(render, render, str(resources_dir))["coherence"] == pytest.approx(1.0, abs=1e-12)
     with caplog.at_level("WARNING", logger="eigs.evaluate"):
         g = group_means("novel", [textured, flat])
     assert g["n"] == 2 and g["sharpness_undefined"] == 1 and g["sharpness"] == textured["sharpness"]
+    assert g["coherence_undefined"] == 1 and g["coherence"] == textured["coherence"]
     assert g["psnr"] == pytest.approx((textured["psnr"] + flat["psnr"]) / 2)
-    assert "1 of 2 views have a flat ground truth" in caplog.text
+    assert "1 of 2 views have a flat ground truth; sharpness undefined" in caplog.text
+    assert "1 of 2 views have a flat ground truth; coherence undefined" in caplog.text
 
 
 def test_per_image_csv_rows(synthetic):

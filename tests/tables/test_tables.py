@@ -33,8 +33,9 @@ MAPPING = {
 
 
 def write_metrics(root, run, scene, method, psnr, ssim, lpips, seconds, gt=True, brisque=None, sharp=True):
-    """A metrics.json; ``sharp``: with the sharpness (1 − LPIPS here, novel views; 0.5 blur views), as runs
-    evaluated since issue 43 have it, else without the key, as the ledger's older ones."""
+    """A metrics.json; ``sharp``: with the sharpness (1 − LPIPS here, novel views; 0.5 blur views) and the coherence
+    (1 − 2·LPIPS; 0.25), as runs evaluated since issue 43 have them, else without the keys, as the ledger's older
+    ones."""
     d = root / scene / "b4" / "eval" / run
     d.mkdir(parents=True)
     metrics = ({"novel": {"n": 2, "psnr": psnr, "ssim_3dgs": ssim, "ssim_skimage-gaussian": ssim - 0.01,
@@ -43,8 +44,9 @@ def write_metrics(root, run, scene, method, psnr, ssim, lpips, seconds, gt=True,
                          "ssim_deblurnerf": ssim, "lpips_alex": lpips}}
                if gt else {"all": {"n": 9, "brisque": brisque, "brisque_undefined": 0}})  # fmt: skip
     if gt and sharp:
-        metrics["novel"].update(sharpness=1 - lpips, sharpness_undefined=0)
-        metrics["blur"].update(sharpness=0.5, sharpness_undefined=0)
+        metrics["novel"].update(sharpness=1 - lpips, sharpness_undefined=0, coherence=1 - 2 * lpips,
+                                coherence_undefined=0)  # fmt: skip
+        metrics["blur"].update(sharpness=0.5, sharpness_undefined=0, coherence=0.25, coherence_undefined=0)
     doc = {"format": "eigs-metrics", "version": 1, "run": run, "method": method, "scene": scene, "bins": 4,
            "run_dir": f"results/{scene}/b4/{run}", "ground_truth": gt, "metrics": metrics,
            "train_seconds": seconds, "steps": 100, "n_gaussians": 1000, "fps": 50.0}  # fmt: skip
@@ -116,6 +118,25 @@ def test_sharpness_is_a_shown_unranked_column_and_missing_where_a_run_predates_i
     t = {t.name: t for t in build_tables({"table1": {"3dgs": "old"}}, summarise([old]))}["table1"]
     assert row(t, "3dgs").cells["sharpness"].ours is None and row(t, "3dgs").cells["psnr"].ours == 20.0
     assert "| – (–) |" in to_markdown(t)
+
+
+def test_coherence_is_a_shown_unranked_column_beside_the_sharpness_and_missing_where_a_run_predates_it(
+    tables, metrics_files, tmp_path
+):
+    t1 = tables["table1"]
+    keys = [c.key for c in t1.columns if c.shown]
+    assert keys.index("coherence") == keys.index("sharpness") + 1
+    eigs = row(t1, "eigs")
+    assert eigs.cells["coherence"].ours == pytest.approx(0.78) and eigs.cells["coherence_blur"].ours == 0.25
+    assert all(r.cells["coherence"].rank is None and r.cells["coherence"].paper is None for r in t1.rows)
+    assert "| 0.890 (–) | 0.78 (–) |" in to_markdown(t1)
+    for name, columns in COLUMNS.items():  # shown in Table I and the ladder, else in the CSV
+        col = next(c for c in columns if c.key == "coherence")
+        assert col.shown == (name in ("table1", "ladder")) and col.decimals == 2
+    old = write_metrics(tmp_path / "old", "old", "alpha", "3dgs", 20.0, 0.8, 0.3, 10.0, sharp=False)
+    t = {t.name: t for t in build_tables({"table1": {"3dgs": "old"}}, summarise([old]))}["table1"]
+    assert row(t, "3dgs").cells["coherence"].ours is None
+    assert "| – (–) | – (–) |" in to_markdown(t)
 
 
 def test_distance_to_oracle(tables):

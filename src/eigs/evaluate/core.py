@@ -1,12 +1,14 @@
 """Evaluate one run folder: render, quantise to 8 bits, save the PNGs, score them.
 
 Synthetic scenes (ground-truth sharp images and ``sfm/test_cameras.h5``): every test camera is rendered, and PSNR,
-SSIM in every lineage (:data:`eigs.metrics.pixel.SSIM_MODES`), LPIPS-alex and the sharpness (the high-frequency power
-ratio, :func:`eigs.metrics.sharpness.hf_ratio`) are computed against the ground truth, separately for blur views
-(kind 0: a training view's ground truth at its first latent time, the reference pose) and novel views (kind 1).
-Cameras come only from ``test_cameras.h5`` (docs/sfm.md, "Test cameras"). A view whose ground truth is flat above
-0.25 cycles/pixel has no sharpness: it is counted in ``sharpness_undefined``, left out of the mean (an empty cell in
-``per_image.csv``) and logged, never scored silently.
+SSIM in every lineage (:data:`eigs.metrics.pixel.SSIM_MODES`), LPIPS-alex, the sharpness (the high-frequency power
+ratio, :func:`eigs.metrics.sharpness.hf_ratio`) and the coherence (the ground truth's high-frequency detail the render
+reproduces, :func:`eigs.metrics.sharpness.hf_coherence`: noise does not raise it) are computed against the ground
+truth, separately for blur views (kind 0: a training view's ground truth at its first latent time, the reference
+pose) and novel views (kind 1). Cameras come only from ``test_cameras.h5`` (docs/sfm.md, "Test cameras"). A view
+whose ground truth is flat above 0.25 cycles/pixel has neither of the last two: it is counted in
+``sharpness_undefined`` and ``coherence_undefined``, left out of their means (empty cells in ``per_image.csv``) and
+logged, never scored silently.
 
 Scenes without ground truth (and, with ``hidden_ground_truth``, simulated recordings through the real-data path
 whose ground truth was kept aside for scoring, beside their test-camera scores): BRISQUE of renders at the training
@@ -40,6 +42,8 @@ log = logging.getLogger("eigs.evaluate")
 SSIM_TABLE_MODE = "3dgs"  # the lineage the tables show (docs/metrics.md)
 LPIPS_NET = "alex"
 SHARPNESS = "sharpness"  # the high-frequency power ratio (eigs.metrics.sharpness.hf_ratio)
+COHERENCE = "coherence"  # the ground truth's high-frequency detail reproduced (eigs.metrics.sharpness.hf_coherence)
+BAND_SCORES = (SHARPNESS, COHERENCE)  # undefined (NaN) where the ground truth is flat in the band
 KIND_NAMES = {0: "blur", 1: "novel"}
 
 
@@ -65,34 +69,35 @@ def _mean(values: list[float]) -> float:
 
 
 def score_pair(img: np.ndarray, ref: np.ndarray, resources: str | None) -> dict[str, float]:
-    """PSNR, SSIM in every lineage, LPIPS-alex and the sharpness of one uint8 render against its uint8 ground truth;
-    ``sharpness`` is NaN where the ground truth is flat in its band (the caller counts and logs it)."""
+    """PSNR, SSIM in every lineage, LPIPS-alex, the sharpness and the coherence of one uint8 render against its uint8
+    ground truth; the last two are NaN where the ground truth is flat in their band (the caller counts and logs it)."""
     from eigs.metrics.perceptual import lpips
     from eigs.metrics.pixel import SSIM_MODES, psnr, ssim
-    from eigs.metrics.sharpness import UndefinedSharpness, hf_ratio
+    from eigs.metrics.sharpness import UndefinedSharpness, hf_coherence, hf_ratio
 
     out = {"psnr": psnr(img, ref)}
     for mode in SSIM_MODES:
         out[f"ssim_{mode}"] = ssim(img, ref, mode)
     out[f"lpips_{LPIPS_NET}"] = lpips(img, ref, LPIPS_NET, resources)
-    try:
-        out[SHARPNESS] = hf_ratio(img, ref)
-    except UndefinedSharpness:
-        out[SHARPNESS] = math.nan
+    for key, fn in ((SHARPNESS, hf_ratio), (COHERENCE, hf_coherence)):
+        try:
+            out[key] = fn(img, ref)
+        except UndefinedSharpness:
+            out[key] = math.nan
     return out
 
 
 def group_means(name: str, per: list[dict[str, float]]) -> dict[str, Any]:
-    """The ``name`` group of metrics.json from its views' scores: ``n``, the mean of each score, and
-    ``sharpness_undefined``, the views without a sharpness (flat ground truth), which its mean leaves out."""
+    """The ``name`` group of metrics.json from its views' scores: ``n``, the mean of each score, and for the sharpness
+    and the coherence ``<key>_undefined``, the views without one (flat ground truth), which its mean leaves out."""
     out: dict[str, Any] = {"n": len(per)}
     for k in per[0]:
         values = [p[k] for p in per]
-        if k == SHARPNESS:
+        if k in BAND_SCORES:
             defined = [v for v in values if math.isfinite(v)]
             if len(defined) < len(values):
-                log.warning("%s: %d of %d views have a flat ground truth; sharpness undefined for them, left out of "
-                            "the mean", name, len(values) - len(defined), len(values))  # fmt: skip
+                log.warning("%s: %d of %d views have a flat ground truth; %s undefined for them, left out of the "
+                            "mean", name, len(values) - len(defined), len(values), k)  # fmt: skip
             out[k], out[f"{k}_undefined"] = _mean(defined), len(values) - len(defined)
         else:
             out[k] = _mean(values)

@@ -5,9 +5,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-HELP = "image-quality metric (psnr, ssim, lpips, sharpness, brisque) of an image or a directory of images"
-METRICS = ("psnr", "ssim", "lpips", "sharpness", "brisque")
-FULL_REFERENCE = ("psnr", "ssim", "lpips", "sharpness")
+HELP = (
+    "image-quality metric (psnr, ssim, lpips, sharpness, coherence, brisque) of an image or a directory of images"
+)
+METRICS = ("psnr", "ssim", "lpips", "sharpness", "coherence", "brisque")
+FULL_REFERENCE = ("psnr", "ssim", "lpips", "sharpness", "coherence")
 BRISQUE_KINDS = {"original": "brisque", "opencv": "brisque_opencv"}  # variant → resource kind
 
 
@@ -127,6 +129,11 @@ def run(args: argparse.Namespace) -> int:
 
         def score(a, b):
             return hf_ratio(a, b)
+    elif args.metric == "coherence":  # the reference's high-frequency detail the image reproduces
+        from eigs.metrics.sharpness import hf_coherence
+
+        def score(a, b):
+            return hf_coherence(a, b)
     else:
         from eigs.metrics.noreference import brisque
 

@@ -1,11 +1,11 @@
 """Read ``metrics.json`` files (``eigs evaluate``) and average each run over its scenes.
 
-A run's synthetic metrics (PSNR / SSIM / LPIPS / sharpness) are means over the scenes with ground truth, at the novel
-views (``novel``; the paper's Table I is most likely a novel-view evaluation) and the blur views (``blur``); BRISQUE is
-the mean over the scenes without ground truth (the ``all`` group: training views and orbit), ``brisque_sim`` the same
-over the simulated recordings through the real-data path whose ground truth was hidden from training
-(``hidden_ground_truth``: they count among the scenes with ground truth too); training seconds, test-time FPS and
-Gaussians are means over every scene of the run. ``sources`` lists the run folders behind the numbers.
+A run's synthetic metrics (PSNR / SSIM / LPIPS / sharpness / coherence) are means over the scenes with ground truth,
+at the novel views (``novel``; the paper's Table I is most likely a novel-view evaluation) and the blur views
+(``blur``); BRISQUE is the mean over the scenes without ground truth (the ``all`` group: training views and orbit),
+``brisque_sim`` the same over the simulated recordings through the real-data path whose ground truth was hidden from
+training (``hidden_ground_truth``: they count among the scenes with ground truth too); training seconds, test-time FPS
+and Gaussians are means over every scene of the run. ``sources`` lists the run folders behind the numbers.
 """
 
 from __future__ import annotations
@@ -27,12 +27,14 @@ SYNTHETIC_COLUMNS = {
     "ssim": ("novel", "ssim_3dgs"),
     "lpips": ("novel", "lpips_alex"),
     "sharpness": ("novel", "sharpness"),
+    "coherence": ("novel", "coherence"),
     "ssim_skimage": ("novel", "ssim_skimage-gaussian"),
     "ssim_deblurnerf": ("novel", "ssim_deblurnerf"),
     "psnr_blur": ("blur", "psnr"),
     "ssim_blur": ("blur", "ssim_3dgs"),
     "lpips_blur": ("blur", "lpips_alex"),
     "sharpness_blur": ("blur", "sharpness"),
+    "coherence_blur": ("blur", "coherence"),
 }
 REAL_COLUMNS = {"brisque": ("all", "brisque")}
 # BRISQUE of the scenes with a hidden ground truth (metrics.json ``hidden_ground_truth``), kept apart from real ones
