@@ -102,40 +102,29 @@ def test_best_and_second_best_exclude_the_oracle(tables):
     assert row(t1, "eigs").cells["brisque"].rank == 1 and row(t1, "3dgs").cells["brisque"].rank == 2
 
 
-def test_sharpness_is_a_shown_unranked_column_and_missing_where_a_run_predates_it(tables, metrics_files, tmp_path):
-    t1 = tables["table1"]
-    keys = [c.key for c in t1.columns if c.shown]
-    assert keys.index("sharpness") == keys.index("lpips") + 1
-    eigs = row(t1, "eigs")
-    assert eigs.cells["sharpness"].ours == pytest.approx(0.89) and eigs.cells["sharpness_blur"].ours == 0.5
-    assert all(r.cells["sharpness"].rank is None and r.cells["sharpness"].paper is None for r in t1.rows)
-    assert "| 0.890 (–) |" in to_markdown(t1)
-    for name, columns in COLUMNS.items():  # every table has it: shown in Table I and the ladder, else in the CSV
-        col = next(c for c in columns if c.key == "sharpness")
-        assert col.shown == (name in ("table1", "ladder")) and col.decimals == 3
-    # a run evaluated before the sharpness existed: its cell is empty, the others as before
-    old = write_metrics(tmp_path / "old", "old", "alpha", "3dgs", 20.0, 0.8, 0.3, 10.0, sharp=False)
-    t = {t.name: t for t in build_tables({"table1": {"3dgs": "old"}}, summarise([old]))}["table1"]
-    assert row(t, "3dgs").cells["sharpness"].ours is None and row(t, "3dgs").cells["psnr"].ours == 20.0
-    assert "| – (–) |" in to_markdown(t)
+# (column, the column before it, eigs's novel and blur values from write_metrics, decimals, as Markdown prints eigs's)
+BAND_COLUMNS = [("sharpness", "lpips", 0.89, 0.5, 3, "| 0.890 (–) |"),
+                ("coherence", "sharpness", 0.78, 0.25, 2, "| 0.890 (–) | 0.78 (–) |")]  # fmt: skip
 
 
-def test_coherence_is_a_shown_unranked_column_beside_the_sharpness_and_missing_where_a_run_predates_it(
-    tables, metrics_files, tmp_path
+@pytest.mark.parametrize(("key", "after", "novel", "blur", "decimals", "shown"), BAND_COLUMNS)
+def test_band_columns_are_shown_unranked_and_missing_where_a_run_predates_them(
+    tables, metrics_files, tmp_path, key, after, novel, blur, decimals, shown
 ):
     t1 = tables["table1"]
     keys = [c.key for c in t1.columns if c.shown]
-    assert keys.index("coherence") == keys.index("sharpness") + 1
+    assert keys.index(key) == keys.index(after) + 1
     eigs = row(t1, "eigs")
-    assert eigs.cells["coherence"].ours == pytest.approx(0.78) and eigs.cells["coherence_blur"].ours == 0.25
-    assert all(r.cells["coherence"].rank is None and r.cells["coherence"].paper is None for r in t1.rows)
-    assert "| 0.890 (–) | 0.78 (–) |" in to_markdown(t1)
-    for name, columns in COLUMNS.items():  # shown in Table I and the ladder, else in the CSV
-        col = next(c for c in columns if c.key == "coherence")
-        assert col.shown == (name in ("table1", "ladder")) and col.decimals == 2
+    assert eigs.cells[key].ours == pytest.approx(novel) and eigs.cells[f"{key}_blur"].ours == blur
+    assert all(r.cells[key].rank is None and r.cells[key].paper is None for r in t1.rows)
+    assert shown in to_markdown(t1)
+    for name, columns in COLUMNS.items():  # every table has it: shown in Table I and the ladder, else in the CSV
+        col = next(c for c in columns if c.key == key)
+        assert col.shown == (name in ("table1", "ladder")) and col.decimals == decimals
+    # a run evaluated before the column existed: its cell is empty, the others as before
     old = write_metrics(tmp_path / "old", "old", "alpha", "3dgs", 20.0, 0.8, 0.3, 10.0, sharp=False)
     t = {t.name: t for t in build_tables({"table1": {"3dgs": "old"}}, summarise([old]))}["table1"]
-    assert row(t, "3dgs").cells["coherence"].ours is None
+    assert row(t, "3dgs").cells[key].ours is None and row(t, "3dgs").cells["psnr"].ours == 20.0
     assert "| – (–) | – (–) |" in to_markdown(t)
 
 
