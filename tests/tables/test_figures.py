@@ -29,3 +29,20 @@ def test_figures_from_two_runs(tmp_path, resources_dir):  # noqa: F811
     assert grid is not None and curves is not None and pareto is not None
     # the grid shows blurry input, two runs and the ground truth side by side: wider than tall
     assert grid.shape[1] > 2 * grid.shape[0]
+
+
+def test_grids_are_named_by_the_workflow_scene_of_the_run_folder(tmp_path, resources_dir):  # noqa: F811
+    """A run folder in the workflow's layout (results/<scene>/b<B>/<run>) whose scene file has another name (as
+    config/e2nerf_blur.yaml's e2b-<scene> are built-ins made another way): the grid takes the workflow's name, which
+    the figures rule expects."""
+    from eigs.artifacts.run import workflow_scene
+
+    assert workflow_scene("results/e2b-blocks/b4/eigs") == "e2b-blocks" and workflow_scene(tmp_path / "x") is None
+    case = make_case(tmp_path)
+    run = tmp_path / "results" / "e2b-case" / "b4" / "eigs"
+    shutil.copytree(case["run"], run)
+    out = tmp_path / "results" / "e2b-case" / "b4" / "eval" / "eigs" / "metrics.json"
+    evaluate_run(run, case["scene"], case["sfm"], out, resources=str(resources_dir))
+    figures = tmp_path / "figures"
+    assert main(["figures", str(out), "-o", str(figures)]) == 0
+    assert sorted(p.name for p in figures.glob("qualitative_*.png")) == ["qualitative_e2b-case.png"]

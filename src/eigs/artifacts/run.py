@@ -24,6 +24,15 @@ CAMERAS = "cameras.npz"  # the refined training cameras (TrainConfig.camera_refi
 CHECKPOINT = "checkpoint.pt"  # in the partial folder
 
 
+def workflow_scene(run_dir: str | Path) -> str | None:
+    """The workflow's name of the scene a run folder was trained on: ``<scene>`` of ``…/<scene>/b<B>/<run>`` (the
+    workflow's layout), None for a folder laid out otherwise. It can differ from the scene file's own name
+    (``e2b-blocks`` is the built-in ``blocks`` made another way)."""
+    parent = Path(run_dir).parent
+    b = parent.name
+    return parent.parent.name if len(b) > 1 and b[0] == "b" and b[1:].isdigit() and parent.parent.name else None
+
+
 def partial_dir(run_dir: str | Path) -> Path:
     """The checkpoint folder of ``run_dir``: its sibling ``RUN_DIR.partial``."""
     run_dir = Path(run_dir)

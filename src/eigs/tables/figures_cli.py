@@ -21,6 +21,7 @@ def run(args: argparse.Namespace) -> int:
     import logging
     from pathlib import Path
 
+    from eigs.artifacts import run as run_folder
     from eigs.tables.collect import read_metrics, summarise
     from eigs.tables.figures import pareto_plot, qualitative_grid, time_curves
     from eigs.util.atomic import atomic_path
@@ -29,13 +30,15 @@ def run(args: argparse.Namespace) -> int:
     runs = summarise(args.metrics)
     order = args.grid_runs.split(",") if args.grid_runs else sorted(runs)
     order = [r for r in order if r in runs] or sorted(runs)
-    paths = {}
+    # grids named by the workflow's scene (the run folder's), which the workflow's figures rule expects; the scene
+    # file's own name where a run folder is laid out otherwise
+    found: dict[tuple[str, str], tuple[Path, dict]] = {}
     for p in args.metrics:
         d = read_metrics(p)
-        paths[(d["run"], d["scene"])] = Path(p)
-    scenes = sorted({s for r in runs.values() for s in r.scenes})
+        found[(d["run"], run_folder.workflow_scene(d["run_dir"]) or d["scene"])] = (Path(p), d)
+    scenes = sorted({s for _, s in found})
     for scene in scenes:
-        entries = [(r, paths[(r, scene)], runs[r].per_scene[scene]) for r in order if (r, scene) in paths]
+        entries = [(r, *found[(r, scene)]) for r in order if (r, scene) in found]
         if not entries:
             continue
         with atomic_path(out / f"qualitative_{scene}.png") as tmp:
