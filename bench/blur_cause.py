@@ -128,7 +128,7 @@ def target_sharpness(results: Path, bins: int) -> dict:
     import numpy as np
 
     from eigs.artifacts.edi import read_edi
-    from eigs.metrics.sharpness import hf_coherence, hf_ratio
+    from eigs.metrics.sharpness import hf_scores
     from eigs.scene.file import read_scene
 
     scene = read_scene(results / "scene.h5", events=False)
@@ -141,8 +141,9 @@ def target_sharpness(results: Path, bins: int) -> dict:
         k = int(np.argmin(np.abs(edi.timestamps_us[v] - sharp.t_us[i])))
         latent = np.clip(np.round(edi.latent[v, k] * 255.0), 0, 255).astype(np.uint8)
         for key, img in (("blurry", blurry[v]), ("latent", latent)):
-            got[key].append(hf_ratio(img, sharp.images[i]))
-            got[f"{key}_coherence"].append(hf_coherence(img, sharp.images[i]))
+            ratio, coherence = hf_scores(img, sharp.images[i])
+            got[key].append(ratio)
+            got[f"{key}_coherence"].append(coherence)
         got["blur_extent_px"].append(float(edi.blur_extent_px[v]))
     return {k: float(np.mean(v)) for k, v in got.items()} | {"views": len(got["blurry"])}
 

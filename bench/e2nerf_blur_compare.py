@@ -38,14 +38,13 @@ def read_ledger(ledger: Path) -> dict[str, RunSummary]:
     return summarise(files)
 
 
-def psnr(runs: dict[str, RunSummary], run: str) -> dict[str, float]:
-    """Scene → novel-view PSNR of ``run`` ({} when the ledger lacks it)."""
-    return runs[run].scene_values("psnr") if run in runs else {}
+def psnrs(runs: dict[str, RunSummary]) -> dict[str, dict[str, float]]:
+    """Run → scene → novel-view PSNR, for every run of :data:`RUNS` ({} for a run the ledger lacks)."""
+    return {run: runs[run].scene_values("psnr") if run in runs else {} for run in RUNS}
 
 
-def diff(runs: dict[str, RunSummary], a: str, b: str, scene: str) -> float:
-    pa, pb = psnr(runs, a), psnr(runs, b)
-    return pa[scene] - pb[scene] if scene in pa and scene in pb else math.nan
+def diff(ps: dict[str, dict[str, float]], a: str, b: str, scene: str) -> float:
+    return ps[a][scene] - ps[b][scene] if scene in ps[a] and scene in ps[b] else math.nan
 
 
 def order(values: dict[str, float]) -> str:
@@ -65,22 +64,23 @@ def mean(values: list[float]) -> float:
 def compare(suite: dict[str, RunSummary], e2b: dict[str, RunSummary]) -> dict:
     """Every figure of the section, per ledger and scene (NaN where a run is missing)."""
     scenes = sorted({s for r in e2b.values() for s in r.scenes} & {s for r in suite.values() for s in r.scenes})
+    by_ledger = {"suite": psnrs(suite), "e2b": psnrs(e2b)}
     out: dict = {"scenes": scenes, "ledgers": {}}
-    for name, runs in (("suite", suite), ("e2b", e2b)):
+    for name, ps in by_ledger.items():
         per: dict[str, dict[str, float]] = {}
         for s in scenes:
-            t2 = {k: psnr(runs, k)[s] for k in TABLE2 if s in psnr(runs, k)}
+            t2 = {k: ps[k][s] for k in TABLE2 if s in ps[k]}
             per[s] = {
-                "eigs-edi": diff(runs, "eigs", "edi-3dgs", s),
-                "e2gs-edi": diff(runs, "e2gs", "edi-3dgs", s),
-                "eigs+-edi": diff(runs, "eigs+", "edi-3dgs", s),
-                "eigs+-oracle": diff(runs, "eigs+", "oracle", s),
-                "rung": diff(runs, "eigs-zero-disc", "eigs-zero", s),
+                "eigs-edi": diff(ps, "eigs", "edi-3dgs", s),
+                "e2gs-edi": diff(ps, "e2gs", "edi-3dgs", s),
+                "eigs+-edi": diff(ps, "eigs+", "edi-3dgs", s),
+                "eigs+-oracle": diff(ps, "eigs+", "oracle", s),
+                "rung": diff(ps, "eigs-zero-disc", "eigs-zero", s),
                 "t2_spread": max(t2.values()) - min(t2.values()) if len(t2) == len(TABLE2) else math.nan,
                 "t2_order": order(t2) if len(t2) == len(TABLE2) else "",
             }
-        means = {run: mean([psnr(runs, run).get(s, math.nan) for s in scenes]) for run in RUNS}
-        counts = {run: sum(s in psnr(runs, run) for s in scenes) for run in RUNS}
+        means = {run: mean([ps[run].get(s, math.nan) for s in scenes]) for run in RUNS}
+        counts = {run: sum(s in ps[run] for s in scenes) for run in RUNS}
         t2_means = {k: means[k] for k in TABLE2 if counts[k] == len(scenes)}
         out["ledgers"][name] = {
             "per_scene": per,
@@ -90,8 +90,8 @@ def compare(suite: dict[str, RunSummary], e2b: dict[str, RunSummary]) -> dict:
             "t2_spread": max(t2_means.values()) - min(t2_means.values()) if len(t2_means) == len(TABLE2) else math.nan,
         }
     # E²NeRF − default per run: the mean over the scenes both ledgers have that run on (paired by scene)
-    out["paired"] = {run: mean([psnr(e2b, run)[s] - psnr(suite, run)[s] for s in scenes
-                                if s in psnr(e2b, run) and s in psnr(suite, run)]) for run in RUNS}  # fmt: skip
+    a, b = by_ledger["e2b"], by_ledger["suite"]
+    out["paired"] = {run: mean([a[run][s] - b[run][s] for s in scenes if s in a[run] and s in b[run]]) for run in RUNS}
     return out
 
 

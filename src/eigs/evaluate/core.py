@@ -73,17 +73,16 @@ def score_pair(img: np.ndarray, ref: np.ndarray, resources: str | None) -> dict[
     ground truth; the last two are NaN where the ground truth is flat in their band (the caller counts and logs it)."""
     from eigs.metrics.perceptual import lpips
     from eigs.metrics.pixel import SSIM_MODES, psnr, ssim
-    from eigs.metrics.sharpness import UndefinedSharpness, hf_coherence, hf_ratio
+    from eigs.metrics.sharpness import UndefinedSharpness, hf_scores
 
     out = {"psnr": psnr(img, ref)}
     for mode in SSIM_MODES:
         out[f"ssim_{mode}"] = ssim(img, ref, mode)
     out[f"lpips_{LPIPS_NET}"] = lpips(img, ref, LPIPS_NET, resources)
-    for key, fn in ((SHARPNESS, hf_ratio), (COHERENCE, hf_coherence)):
-        try:
-            out[key] = fn(img, ref)
-        except UndefinedSharpness:
-            out[key] = math.nan
+    try:
+        out[SHARPNESS], out[COHERENCE] = hf_scores(img, ref)
+    except UndefinedSharpness:
+        out[SHARPNESS] = out[COHERENCE] = math.nan
     return out
 
 

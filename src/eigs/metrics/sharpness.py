@@ -61,10 +61,9 @@ def _band_spectrum(y: np.ndarray, cutoff: float) -> tuple[np.ndarray, float]:
     return spectrum[band_mask(h, w, cutoff)], h * w * float(np.sum(window**2))
 
 
-def band_power(y: np.ndarray, cutoff: float = CUTOFF) -> float:
-    """Band power ``P`` (module docstring) of a luminance image ``y`` ``(H, W)``: variance per pixel above
-    ``cutoff`` cycles/pixel after mean removal and the Hann window, in [0, 1]² units."""
-    band, norm = _band_spectrum(y, cutoff)
+def _band_power(band: np.ndarray, norm: float) -> float:
+    """Band power ``P`` (module docstring) from :func:`_band_spectrum`'s bins and normalisation: variance per pixel
+    above the cutoff after mean removal and the Hann window, in [0, 1]² units."""
     return float(np.sum(band.real**2 + band.imag**2) / norm)
 
 
@@ -72,7 +71,7 @@ def _reference_band(ref: np.ndarray, cutoff: float, figure: str) -> tuple[np.nda
     """The band bins, normalisation and band power of a ground truth's luminance ``ref``; raises
     :class:`UndefinedSharpness` (naming ``figure``) when the power is below :data:`MIN_BAND_POWER`."""
     band, norm = _band_spectrum(ref, cutoff)
-    power = float(np.sum(band.real**2 + band.imag**2) / norm)
+    power = _band_power(band, norm)
     if power < MIN_BAND_POWER:
         raise UndefinedSharpness(
             None,
@@ -82,6 +81,16 @@ def _reference_band(ref: np.ndarray, cutoff: float, figure: str) -> tuple[np.nda
     return band, norm, power
 
 
+def _scores(img: np.ndarray, ref: np.ndarray, cutoff: float, figure: str) -> tuple[float, float]:
+    """The power ratio and the coherence of ``img`` against ``ref`` (their band bins computed once); an undefined
+    reference raises :class:`UndefinedSharpness` naming ``figure``."""
+    a, b = float_pair(img, ref)
+    band_ref, norm, p_ref = _reference_band(luminance(b), cutoff, figure)
+    band_img, _ = _band_spectrum(luminance(a), cutoff)
+    cross = float(np.sum(band_img.real * band_ref.real + band_img.imag * band_ref.imag) / norm)
+    return _band_power(band_img, norm) / p_ref, cross / p_ref
+
+
 def hf_ratio(img: np.ndarray, ref: np.ndarray, cutoff: float = CUTOFF) -> float:
     """High-frequency power ratio of ``img`` (a render) against ``ref`` (its ground truth): ``P(img) / P(ref)``.
 
@@ -89,9 +98,7 @@ def hf_ratio(img: np.ndarray, ref: np.ndarray, cutoff: float = CUTOFF) -> float:
     :data:`MIN_SIZE`). Returns a finite float >= 0. Raises :class:`UndefinedSharpness` when the reference's band
     power is below :data:`MIN_BAND_POWER` (a flat ground truth).
     """
-    a, b = float_pair(img, ref)
-    _, _, p_ref = _reference_band(luminance(b), cutoff, "sharpness ratio")
-    return band_power(luminance(a), cutoff) / p_ref
+    return _scores(img, ref, cutoff, "sharpness ratio")[0]
 
 
 def hf_coherence(img: np.ndarray, ref: np.ndarray, cutoff: float = CUTOFF) -> float:
@@ -102,7 +109,10 @@ def hf_coherence(img: np.ndarray, ref: np.ndarray, cutoff: float = CUTOFF) -> fl
     counter-phase. Unlike the power ratio, noise does not raise it, so the two together separate detail kept
     (coherence) from power added (``hf_ratio − coherence²``: at least the power of the band that the ground truth
     does not explain, by Cauchy-Schwarz at most ``hf_ratio``). Inputs and errors as :func:`hf_ratio`."""
-    a, b = float_pair(img, ref)
-    band_ref, norm, p_ref = _reference_band(luminance(b), cutoff, "high-frequency coherence")
-    band_img, _ = _band_spectrum(luminance(a), cutoff)
-    return float(np.sum(band_img.real * band_ref.real + band_img.imag * band_ref.imag) / norm) / p_ref
+    return _scores(img, ref, cutoff, "high-frequency coherence")[1]
+
+
+def hf_scores(img: np.ndarray, ref: np.ndarray, cutoff: float = CUTOFF) -> tuple[float, float]:
+    """``(hf_ratio, hf_coherence)`` of ``img`` against ``ref`` from one transform of each (what ``eigs evaluate``
+    reports for every view). Inputs and errors as :func:`hf_ratio`."""
+    return _scores(img, ref, cutoff, "sharpness ratio and coherence")
