@@ -33,3 +33,18 @@ def test_the_scenes_and_upstream_stages_are_the_suite_ones_and_both_protocols_ar
     assert study["sfm"] == suite["sfm"] and study["threads"] == suite["threads"]
     assert study.get("init") == suite.get("init")
     assert study["evaluate"]["test_pose_iters"] > 0
+
+
+def test_the_davis346_study_pairs_davis346_runs_on_its_scenes_and_upstream():
+    base, study = load("davis346.yaml"), load("camera_refine_d346.yaml")
+    assert set(study["runs"]) == {f"{r}{s}" for r in ("edi-3dgs", "oracle", "eigs+") for s in ("", "-cam")}
+    for run in ("edi-3dgs", "oracle", "eigs+"):
+        plain, refined = resolved(study["runs"][run]), resolved(study["runs"][f"{run}-cam"])
+        assert plain == resolved(base["runs"][run]), run
+        assert differing(plain, refined) == {"train.camera_refine"} and refined["train.camera_refine"], run
+    assert set(study["scenes"]) == {"d346-blocks", "d346-chair", "d346-drums"}
+    assert all(study["scenes"][s] == base["scenes"][s] for s in study["scenes"])
+    for key in ("edi", "sfm", "threads"):
+        assert study[key] == base[key], key
+    assert study.get("init") == base.get("init")
+    assert study["evaluate"]["test_pose_iters"] > 0
