@@ -111,6 +111,14 @@ def transform_gaussians(means: Tensor, quats: Tensor, t: Tensor) -> tuple[Tensor
     return moved, quat_multiply(qr.expand_as(quats), quats)
 
 
+def se3_adjoint(t: Tensor) -> Tensor:
+    """(…, 4, 4) rigid transforms ``T = [R p]`` → (…, 6, 6) adjoints for twists ordered (ω, ν):
+    ``T · exp(ξ) · T⁻¹ = exp(Ad_T ξ)`` with ``Ad_T = [[R, 0], [p× R, R]]`` (exact, no small-angle assumption)."""
+    r, p = t[..., :3, :3], t[..., :3, 3]
+    top = torch.cat([r, torch.zeros_like(r)], -1)
+    return torch.cat([top, torch.cat([_skew(p) @ r, r], -1)], -2)
+
+
 def gaussian_motion(c2w: Tensor, xi: Tensor, c2w_inv: Tensor) -> Tensor:
     """(…, 4, 4) ``c2w · exp(−ξ) · c2w⁻¹``: the motion of the Gaussians that renders, from camera ``c2w``, what the
     camera ``c2w · exp(ξ)`` sees (``xi`` (…, 6) a camera-frame twist; ``c2w_inv`` the inverse of ``c2w``)."""

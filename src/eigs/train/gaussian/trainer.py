@@ -274,4 +274,4 @@ def run_cameras(tr: Trainer) -> RefinedCameras | None:
     views = np.zeros(cam.ref.shape[0], bool)
     views[tr.data.reference_views()] = True
     return RefinedCameras(method=tr.cfg.method, before=cam.ref.cpu().numpy(), after=cam.corrected_c2w().numpy(),
-                          twist=cam.xi.detach().cpu().to(torch.float64).numpy(), views=views)  # fmt: skip
+                          twist=cam.twists().detach().cpu().numpy(), views=views)  # fmt: skip
