@@ -67,26 +67,58 @@ def test_the_adjoint_conjugates_the_exponential():
         torch.testing.assert_close(torch.linalg.matrix_exp(_hat(se3_adjoint(t) @ xi)), lhs, atol=1e-13, rtol=0)
 
 
+def _vee(m: torch.Tensor) -> torch.Tensor:
+    """(4, 4) matrix in se(3) → its twist (ω, ν)."""
+    return torch.stack([m[2, 1], m[0, 2], m[1, 0], m[0, 3], m[1, 3], m[2, 3]])
+
+
+def _ring(n: int) -> torch.Tensor:
+    """n cameras around the origin at similar distances, as a recording's views are."""
+    return torch.stack([_look_at([2.8 * math.cos(a), 0.4 * math.sin(3 * a), 2.8 * math.sin(a)])
+                        for a in torch.linspace(0.2, 2.6, n).tolist()])  # fmt: skip
+
+
+def _gauge_directions(ref: torch.Tensor) -> list[torch.Tensor]:
+    """The 13 directions of stacked camera-frame twists that move the reconstruction as a whole, built from the
+    conjugation P⁻¹·ζ^·P (not from the adjoint the module uses): each world twist e_j, the scaling about the
+    centroid, each common camera-frame twist e_j."""
+    inv = torch.linalg.inv(ref)
+    out = []
+    for j in range(6):
+        zeta = torch.zeros(6, dtype=F64)
+        zeta[j] = 1.0
+        out.append(torch.stack([_vee(inv[v] @ _hat(zeta) @ ref[v]) for v in range(len(ref))]))
+    centroid = ref[:, :3, 3].mean(dim=0)
+    out.append(torch.stack([_vee(inv[v] @ _hat(torch.cat([torch.zeros(3, dtype=F64), ref[v, :3, 3] - centroid]))
+                                 @ ref[v]) for v in range(len(ref))]))  # fmt: skip
+    for j in range(6):
+        common = torch.zeros(len(ref), 6, dtype=F64)
+        common[:, j] = 1.0
+        out.append(common)
+    return out
+
+
 def test_the_correction_is_the_matrix_exponential_and_renders_the_corrected_camera():
-    """Two views, only view 1's parameters non-zero (η): anchoring halves its world correction and gives view 0 the
-    opposite one, so W_1⁻¹ = P₁·exp(−η/2)·P₁⁻¹ and W_0⁻¹ = P₁·exp(η/2)·P₁⁻¹, against torch.linalg.matrix_exp; and
-    the moved Gaussians at P render exactly what the original ones render at the corrected camera (float64)."""
-    ref = torch.stack([_look_at([0.3, -0.2, 3.0]), _look_at([-1.0, 0.1, 2.8])])
+    """Anchored twists are orthogonal to the 13 gauge directions, W_v⁻¹ = P_v·exp(−ξ_v)·P_v⁻¹ and the corrected
+    camera P_v·exp(ξ_v) against torch.linalg.matrix_exp, and the moved Gaussians at P_v render exactly what the
+    original ones render at the corrected camera (float64)."""
+    ref = _ring(5)
     cam = CameraRefinement(ref, torch.device("cpu"), F64)
     torch.testing.assert_close(cam.world_motion(0), torch.eye(4, dtype=F64), atol=1e-15, rtol=0)  # η = 0: identity
-    eta = torch.tensor([0.03, -0.05, 0.02, 0.04, -0.01, 0.06], dtype=F64)
     with torch.no_grad():
-        cam.xi[1] = eta
-    p1, p1_inv = ref[1], torch.linalg.inv(ref[1])
-    torch.testing.assert_close(cam.twists()[1], eta / 2, atol=1e-15, rtol=0)
-    torch.testing.assert_close(cam.world_motion(1), p1 @ torch.linalg.matrix_exp(-_hat(eta / 2)) @ p1_inv,
-                               atol=1e-14, rtol=0)  # fmt: skip
-    torch.testing.assert_close(cam.world_motion(0), p1 @ torch.linalg.matrix_exp(_hat(eta / 2)) @ p1_inv,
-                               atol=1e-14, rtol=0)  # fmt: skip
+        cam.xi.copy_(torch.randn(5, 6, generator=torch.Generator().manual_seed(6), dtype=F64) * 0.03)
+    xi = cam.twists().detach()
+    assert (xi - cam.xi.detach()).abs().max() > 1e-3 and xi.abs().max() > 1e-3  # projected, a correction left
+    for d in _gauge_directions(ref):
+        assert abs(float((xi * d).sum())) < 1e-14 * float(d.norm())
     corrected = cam.corrected_c2w()
-    torch.testing.assert_close(corrected[1], p1 @ torch.linalg.matrix_exp(_hat(eta / 2)), atol=1e-14, rtol=0)
     means, quats, log_scales, opac, sh, K = _scene()
-    for v in (0, 1):
+    for v in (0, 3):
+        inv = torch.linalg.inv(ref[v])
+        # se3_exp's Rodrigues coefficients are exact to ~1e-12 relative (eigs.render.rigid)
+        torch.testing.assert_close(cam.world_motion(v), ref[v] @ torch.linalg.matrix_exp(-_hat(xi[v])) @ inv,
+                                   atol=1e-10, rtol=0)  # fmt: skip
+        torch.testing.assert_close(corrected[v], ref[v] @ torch.linalg.matrix_exp(_hat(xi[v])), atol=1e-10, rtol=0)
         moved_means, moved_quats = cam.move(v, means, quats)
         seen, _, _ = render_gaussians(moved_means, moved_quats, log_scales, opac, sh, ref[v], K, 40, 30)
         direct, _, _ = render_gaussians(means, quats, log_scales, opac, sh, corrected[v], K, 40, 30)
@@ -94,66 +126,66 @@ def test_the_correction_is_the_matrix_exponential_and_renders_the_corrected_came
         torch.testing.assert_close(seen, direct, atol=1e-9, rtol=0)
 
 
-def test_a_common_motion_of_every_camera_is_not_learned():
-    """The gauge: parameters that move every posed camera by one world motion exp(ζ) (η_v = P_v⁻¹·ζ^·P_v, from the
-    conjugation, not from the adjoint) leave every view uncorrected, and the world corrections of any parameters sum
-    to zero; a view without a pose keeps its parameters and does not count."""
-    ref = torch.stack([_look_at([0.3, -0.2, 3.0]), _look_at([-1.0, 0.1, 2.8]), _look_at([0.2, 0.9, 2.6]),
-                       torch.full((4, 4), float("nan"), dtype=F64)])  # fmt: skip
+def test_a_motion_of_the_whole_reconstruction_is_not_learned():
+    """Parameters along any gauge direction (a world motion, a scaling, a common camera-frame twist) leave every view
+    uncorrected; parameters orthogonal to all of them pass unchanged, so the projection is idempotent; a view without
+    a pose keeps its parameters and takes no part."""
+    ref = torch.cat([_ring(6), torch.full((1, 4, 4), float("nan"), dtype=F64)])
     cam = CameraRefinement(ref, torch.device("cpu"), F64)
-    zeta = torch.tensor([0.02, 0.03, -0.01, 0.05, -0.04, 0.02], dtype=F64)
+    directions = _gauge_directions(ref[:6])
+    for d in directions:
+        with torch.no_grad():
+            cam.xi[:6] = 0.02 * d / d.abs().max()
+            cam.xi[6] = 0.5
+        for v in range(6):
+            torch.testing.assert_close(cam.world_motion(v), torch.eye(4, dtype=F64), atol=1e-14, rtol=0)
+        torch.testing.assert_close(cam.twists()[6], torch.full((6,), 0.5, dtype=F64), atol=0, rtol=0)
+    basis = torch.stack([d.reshape(-1) for d in directions], dim=1)  # (36, 13)
+    free = torch.randn(36, generator=torch.Generator().manual_seed(9), dtype=F64)
+    free = free - basis @ torch.linalg.lstsq(basis, free[:, None]).solution[:, 0]  # orthogonal to every direction
     with torch.no_grad():
-        for v in range(3):
-            m = torch.linalg.inv(ref[v]) @ _hat(zeta) @ ref[v]
-            cam.xi[v] = torch.stack([m[2, 1], m[0, 2], m[1, 0], m[0, 3], m[1, 3], m[2, 3]])
-        cam.xi[3] = 0.5
-    for v in range(3):
-        torch.testing.assert_close(cam.world_motion(v), torch.eye(4, dtype=F64), atol=1e-14, rtol=0)
-    torch.testing.assert_close(cam.twists()[3], torch.full((6,), 0.5, dtype=F64), atol=0, rtol=0)
-    with torch.no_grad():
-        cam.xi[:3] = torch.randn(3, 6, generator=torch.Generator().manual_seed(8), dtype=F64) * 0.05
-    world = torch.stack([se3_adjoint(ref[v]) @ cam.twists()[v] for v in range(3)])
-    assert world.abs().max() > 1e-3
-    torch.testing.assert_close(world.sum(dim=0), torch.zeros(6, dtype=F64), atol=1e-15, rtol=0)
+        cam.xi[:6] = (0.02 * free / free.abs().max()).reshape(6, 6)
+    torch.testing.assert_close(cam.twists()[:6], cam.xi[:6].detach(), atol=1e-15, rtol=0)
 
 
 def test_the_gradient_of_the_moved_gaussians_matches_finite_differences():
-    ref = torch.stack([_look_at([0.4, 0.3, 2.5]), _look_at([-0.5, 0.2, 2.7])])
+    ref = _ring(4)
     cam = CameraRefinement(ref, torch.device("cpu"), F64)
     means, quats, *_ = _scene(12, seed=1)
-    wm = torch.randn(2, 12, 3, dtype=F64, generator=torch.Generator().manual_seed(2))
-    wq = torch.randn(2, 12, 4, dtype=F64, generator=torch.Generator().manual_seed(3))
+    wm = torch.randn(4, 12, 3, dtype=F64, generator=torch.Generator().manual_seed(2))
+    wq = torch.randn(4, 12, 4, dtype=F64, generator=torch.Generator().manual_seed(3))
 
     def f(xi: torch.Tensor) -> torch.Tensor:
-        cam.xi = xi  # the parameters of both views are the checker's input
+        cam.xi = xi  # the parameters of every view are the checker's input
         out = 0
-        for v in (0, 1):
+        for v in range(4):
             m, q = cam.move(v, means, quats)
             out = out + (m * wm[v]).sum() + (q * wq[v]).sum()
         return out
 
-    start = torch.tensor([[0.02, -0.04, 0.01, 0.03, 0.02, -0.05], [-0.01, 0.03, 0.02, -0.02, 0.04, 0.01]], dtype=F64)
-    for xi0 in (torch.zeros(2, 6, dtype=F64), start):
+    start = torch.randn(4, 6, dtype=F64, generator=torch.Generator().manual_seed(4)) * 0.03
+    for xi0 in (torch.zeros(4, 6, dtype=F64), start):
         assert torch.autograd.gradcheck(f, (xi0.clone().requires_grad_(True),), eps=1e-6, atol=1e-7)
 
 
 def test_perturbed_cameras_move_back_toward_the_truth():
-    """Three views rendered at their true cameras, trained from cameras perturbed by 0.04 rad and 0.06 per view less
-    their common world motion (worst 2.4° and 0.082, 3 % of the distance) with the Gaussians fixed: Adam on the twists
-    alone (150 steps, lr 1e-2 decaying to 1e-4) brings the worst rotation error to under a twentieth and the worst
-    translation error too (measured: 0.0007°, 0.00002)."""
+    """Six views around the Gaussians whose true cameras are their starting cameras moved by a correction outside
+    the gauge directions (0.04 rad and 0.06 per view, less what the anchoring leaves to the Gaussians; worst error
+    2.5° and 0.061, 2 % of the distance), trained with the Gaussians fixed: Adam on the twists alone (150 steps, lr
+    1e-2 decaying to 1e-4) brings the worst rotation error to under a twentieth and the worst translation error too
+    (measured: 0.002°, 0.00009)."""
     means, quats, log_scales, opac, sh, K = _scene(150, seed=4)
     log_scales = log_scales + 0.5  # larger Gaussians: an image that changes smoothly with the camera
-    true = torch.stack([_look_at([0.5, -0.3, 2.6]), _look_at([-0.6, 0.2, 2.7]), _look_at([0.1, 0.6, 2.5])])
-    targets = [render_gaussians(means, quats, log_scales, opac, sh, c, K, 40, 30)[0] for c in true]
+    n = 6
+    start = _ring(n)
     g = torch.Generator().manual_seed(5)
-    dirs = torch.randn(3, 6, generator=g, dtype=F64)
-    noise = torch.cat([0.04 * dirs[:, :3] / dirs[:, :3].norm(dim=1, keepdim=True),
-                       0.06 * dirs[:, 3:] / dirs[:, 3:].norm(dim=1, keepdim=True)], dim=1)  # fmt: skip
-    # without their common world motion (the gauge, which the anchored refinement leaves to the Gaussians)
-    world = torch.stack([se3_adjoint(true[v]) @ noise[v] for v in range(3)])
-    noise = torch.stack([torch.linalg.solve(se3_adjoint(true[v]), world[v] - world.mean(dim=0)) for v in range(3)])
-    start = torch.stack([true[v] @ torch.linalg.matrix_exp(_hat(noise[v])) for v in range(3)])
+    dirs = torch.randn(n, 6, generator=g, dtype=F64)
+    shift = torch.cat([0.04 * dirs[:, :3] / dirs[:, :3].norm(dim=1, keepdim=True),
+                       0.06 * dirs[:, 3:] / dirs[:, 3:].norm(dim=1, keepdim=True)], dim=1).reshape(-1)  # fmt: skip
+    basis = torch.stack([d.reshape(-1) for d in _gauge_directions(start)], dim=1)
+    shift = (shift - basis @ torch.linalg.lstsq(basis, shift[:, None]).solution[:, 0]).reshape(n, 6)
+    true = torch.stack([start[v] @ torch.linalg.matrix_exp(_hat(shift[v])) for v in range(n)])
+    targets = [render_gaussians(means, quats, log_scales, opac, sh, c, K, 40, 30)[0] for c in true]
     cam = CameraRefinement(start, torch.device("cpu"), F64)
     opt = torch.optim.Adam([cam.xi], lr=1e-2)
 
@@ -163,13 +195,12 @@ def test_perturbed_cameras_move_back_toward_the_truth():
         return rot, float(rel[:, :3, 3].norm(dim=1).max())
 
     rot0, tr0 = errors()
-    assert rot0 > 2.0 and tr0 > 0.055
     for step in range(150):
         for group in opt.param_groups:
             group["lr"] = exp_decay(1e-2, 1e-4, step, 150)
         opt.zero_grad()
         loss = sum((render_gaussians(*cam.move(v, means, quats), log_scales, opac, sh, start[v], K, 40, 30)[0]
-                    - targets[v]).abs().mean() for v in range(3))  # fmt: skip
+                    - targets[v]).abs().mean() for v in range(n))  # fmt: skip
         loss.backward()
         opt.step()
     rot1, tr1 = errors()

@@ -7,16 +7,21 @@ moves them by: the ADE, a trajectory) are moved by ``W_v⁻¹`` with ``W_v = P_v
 exactly what cameras ``W_v · P`` see (:mod:`eigs.render.rigid`): for the reference camera that is
 ``P_v · exp(ξ_v)``, and every latent camera of the view is moved by the same rigid ``W_v``.
 
-The corrections are anchored to the SfM frame. Moving every camera by one rigid motion ``M`` and the Gaussians by
-``M`` as well renders the same images, so the loss cannot see that motion (the gauge of the reconstruction); left
-free, the trained cameras and the model drift together off the frame the test cameras were registered in, and
-every test view is rendered off by that drift (measured on four 128×96 scenes, `edi-3dgs`: −4.5 to −5.7 dB on
-today's protocol, docs/training.md "Camera refinement"). As bundle adjusters fix a gauge, the learned twists ``η_v``
-(the parameters) are projected: in world coordinates the view's correction is ``ζ_v = Ad(P_v) η_v``
-(``W_v = exp(ζ_v)``), and the twist used is ``ξ_v = η_v − Ad(P_v)⁻¹ ζ̄`` with ``ζ̄`` the mean of ``ζ_v`` over the views
-with a pose, so the world corrections sum to zero: no common motion of all cameras is learned, the average camera
-stays where SfM put it, and the Gaussians absorb a common error instead (as they must for the test cameras, which
-share it). The projection is linear and idempotent; its gradient is its transpose (autograd).
+The corrections are anchored to the SfM frame: the learned parameters ``η`` (V, 6) are projected, and the twists
+used are ``ξ = η − G·G⁺·η`` (over the views with a pose; ``G⁺`` the pseudo-inverse), ``G`` spanning 13 directions in
+which the corrections move the reconstruction as a whole and the loss cannot, or can hardly, see them:
+- every camera moved by one world motion ``exp(ζ)`` (6; ``η_v = Ad(P_v)⁻¹ ζ``): with the Gaussians moved alike it
+  renders the same images (the gauge of a reconstruction);
+- the cameras scaled about their centroid (1; world translations ``∝ c_v − c̄``): the same with the Gaussians scaled;
+- one camera-frame twist for every view (6; ``η_v = ξ``): for cameras around an object at similar distances a common
+  tilt equals a translation of the model, so it is nearly invisible to the loss.
+Left free, training walks along them: measured on 128×96 scenes with `edi-3dgs` (docs/training.md "Camera
+refinement"), unanchored corrections shared a 0.27–0.33° tilt about the cameras' x axes (spread 0.05–0.08° between
+views), the model followed, and every test camera SfM registered was off by it (−4.5 to −5.7 dB under today's
+protocol, +0.2 to +0.5 dB with the test cameras refined); removing the world motion alone left the tilt (−2 dB). The
+projection is linear and idempotent; its gradient is its transpose (autograd). A common error of the SfM along these
+directions is left to the Gaussians, as for the test cameras, which share it. With one or two posed views nothing is
+left to learn (the 13 directions span their corrections).
 
 Schedule and regulariser from published practice: Adam on the twists with learning rate ``lr_camera`` decaying
 exponentially to ``lr_camera_final`` over the run's schedule and an L2 weight decay ``camera_reg`` on the twists —
@@ -31,6 +36,20 @@ import torch
 from torch import Tensor
 
 from eigs.render.rigid import gaussian_motion, se3_adjoint, se3_exp, transform_gaussians
+
+
+def gauge_basis(c2w: Tensor) -> Tensor:
+    """(6 V, 13) float64: the directions of the stacked camera-frame twists (V views, ``c2w`` (V, 4, 4) float64) along
+    which the corrections move the reconstruction as a whole (module docstring): a common world twist (6 columns), a
+    scaling about the cameras' centroid (1), a common camera-frame twist (6)."""
+    v = c2w.shape[0]
+    ad_inv = se3_adjoint(torch.linalg.inv(c2w))  # (V, 6, 6) world-frame twist → camera-frame twist
+    world = ad_inv  # (V, 6, 6): column j is the camera twists of world twist e_j
+    centres = c2w[:, :3, 3]
+    spread = torch.cat([torch.zeros_like(centres), centres - centres.mean(dim=0)], dim=1)  # (V, 6) world twists
+    scale = (ad_inv @ spread[:, :, None])  # (V, 6, 1)
+    common = torch.eye(6, dtype=c2w.dtype).expand(v, 6, 6)
+    return torch.cat([world, scale, common], dim=2).reshape(6 * v, 13)
 
 
 class CameraRefinement:
@@ -49,20 +68,17 @@ class CameraRefinement:
         if not bool(posed.any()):
             raise ValueError("camera refinement needs at least one view with a pose")
         self.posed = posed.to(device)
-        eye = torch.eye(4, dtype=torch.float64)
-        safe = torch.where(posed[:, None, None], self.ref, eye)
-        self.ad = se3_adjoint(safe).to(device)  # (V, 6, 6) camera-frame twist → world-frame twist
-        self.ad_inv = se3_adjoint(torch.linalg.inv(safe)).to(device)  # (V, 6, 6) its inverse
+        g = gauge_basis(self.ref[posed])  # (6 Vp, 13)
+        self.gauge = g.to(device)
+        self.gauge_pinv = torch.linalg.pinv(g, rtol=1e-10).to(device)  # (13, 6 Vp)
 
     def twists(self) -> Tensor:
-        """(V, 6) float64 anchored twists ``ξ_v = η_v − Ad(P_v)⁻¹ ζ̄`` (module docstring): their world corrections
-        ``Ad(P_v) ξ_v`` sum to zero over the posed views (to rounding, ~1e-16 relative); views without a pose keep
-        ``η_v``. Differentiable in ``xi``."""
+        """(V, 6) float64 anchored twists ``ξ = η − G·G⁺·η`` (module docstring): orthogonal to every gauge direction
+        (to rounding, ~1e-15 relative); views without a pose keep ``η_v``. Differentiable in ``xi``."""
         eta = self.xi.to(torch.float64)
-        zeta = (self.ad @ eta[:, :, None])[:, :, 0]  # (V, 6) world-frame corrections
-        mean = zeta[self.posed].mean(dim=0)  # (6,)
-        shift = (self.ad_inv @ mean[None, :, None].expand(len(eta), 6, 1))[:, :, 0]  # (V, 6)
-        return eta - torch.where(self.posed[:, None], shift, torch.zeros_like(shift))
+        flat = eta[self.posed].reshape(-1)  # (6 Vp,)
+        anchored = flat - self.gauge @ (self.gauge_pinv @ flat)
+        return eta.masked_scatter(self.posed[:, None].expand_as(eta), anchored)
 
     def param_group(self, lr: float, weight_decay: float) -> dict:
         return {"params": [self.xi], "lr": lr, "weight_decay": weight_decay, "name": self.NAME}
