@@ -17,8 +17,8 @@ which the corrections move the reconstruction as a whole and the loss cannot, or
   tilt equals a translation of the model, so it is nearly invisible to the loss.
 Left free, training walks along them: measured on 128×96 scenes with `edi-3dgs` (docs/training.md "Camera
 refinement"), unanchored corrections shared a 0.27–0.33° tilt about the cameras' x axes (spread 0.05–0.08° between
-views), the model followed, and every test camera SfM registered was off by it (−4.5 to −5.7 dB under today's
-protocol, +0.2 to +0.5 dB with the test cameras refined); removing the world motion alone left the tilt (−2 dB). The
+views), the model followed, and every test camera SfM registered was off by it (−4.9 to −5.6 dB under today's
+protocol, +0.1 to +0.3 dB with the test cameras refined); removing the world motion alone left the tilt (−2 dB). The
 projection is linear and idempotent; its gradient is its transpose (autograd). A common error of the SfM along these
 directions is left to the Gaussians, as for the test cameras, which share it. With one or two posed views nothing is
 left to learn (the 13 directions span their corrections).
