@@ -145,7 +145,7 @@ def test_a_motion_of_the_whole_reconstruction_is_not_learned():
     free = free - basis @ torch.linalg.lstsq(basis, free[:, None]).solution[:, 0]  # orthogonal to every direction
     with torch.no_grad():
         cam.xi[:6] = (0.02 * free / free.abs().max()).reshape(6, 6)
-    torch.testing.assert_close(cam.twists()[:6], cam.xi[:6].detach(), atol=1e-15, rtol=0)
+    torch.testing.assert_close(cam.twists()[:6], cam.xi[:6].detach(), atol=1e-14, rtol=0)  # entries ~0.02
 
 
 def test_the_gradient_of_the_moved_gaussians_matches_finite_differences():

@@ -43,11 +43,11 @@ def gauge_basis(c2w: Tensor) -> Tensor:
     which the corrections move the reconstruction as a whole (module docstring): a common world twist (6 columns), a
     scaling about the cameras' centroid (1), a common camera-frame twist (6)."""
     v = c2w.shape[0]
-    ad_inv = se3_adjoint(torch.linalg.inv(c2w))  # (V, 6, 6) world-frame twist → camera-frame twist
-    world = ad_inv  # (V, 6, 6): column j is the camera twists of world twist e_j
+    # (V, 6, 6) world-frame twist → camera-frame twist: column j holds the camera twists of world twist e_j
+    world = se3_adjoint(torch.linalg.inv(c2w))
     centres = c2w[:, :3, 3]
     spread = torch.cat([torch.zeros_like(centres), centres - centres.mean(dim=0)], dim=1)  # (V, 6) world twists
-    scale = (ad_inv @ spread[:, :, None])  # (V, 6, 1)
+    scale = world @ spread[:, :, None]  # (V, 6, 1)
     common = torch.eye(6, dtype=c2w.dtype).expand(v, 6, 6)
     return torch.cat([world, scale, common], dim=2).reshape(6 * v, 13)
 
