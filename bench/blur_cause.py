@@ -17,12 +17,17 @@ Then, each on ``eigs+-gt`` (ground-truth poses, so that neither the poses nor th
   the Gaussians the blur average does not grow?
 - ``-noevent``: no event-integration loss: is it the events (noisy at the preset's light level)?
 - ``-latent2``: ``latent_weight`` 2 instead of 0.5: is it the weight of the sharp EDI frames against the blur?
+  ``-latent4``, ``-latent8``: further up that axis; ``-latent2-dssim``, ``-latent4-dssim``: the latent term as
+  ``edi-3dgs``'s photometric loss (L1 + D-SSIM, ``latent_dssim``), the loss the sharpest run trains with;
 - ``-floor0``: the discrete blur target in the dark pixels too (``discrete_floor`` 0 instead of 0.02): at the
   preset's light level 31 % of d346-chair's pixels are darker than 0.02 and keep the blurry frame as target, which
   an average of N + 1 sharp renders cannot match (the discrete average is not the exposure integral), and an L1
   loss pulls as hard on a dark pixel as on a bright one;
 - ``-noade``: no ADE (the renders at the latent poses; without the ADE there is no residual to regularise, so no
   consistency loss either): is it the ADE's displacements?
+
+``eigs+-latent2`` and ``eigs+-latent4-dssim`` change the latent term of the pipeline's run (SfM poses): does what
+moves the ground-truth-pose run move the run a user gets?
 
 Each variant is trained and evaluated by the CLI (``eigs train``, ``eigs evaluate`` with the scene's flags from the
 config) into ``--work`` (default ``results/bench/blur_cause/<scene>``; a finished variant is not retrained). Reported:
@@ -31,7 +36,9 @@ ground truth, 1 = as sharp), final Gaussians, the displacement error of the late
 metrics.json; 0 exact, 1 as wrong as none) and the training time.
 
 Run: ``.venv/bin/python bench/blur_cause.py --results results/d346-chair --config config/davis346.yaml
-[--variants eigs+ eigs+-gt ...] [--threads 1] [--out DIR]``; the section is named ``blur-cause-<scene>``.
+[--variants eigs+ eigs+-gt ...] [--threads 1] [--tag T] [--out DIR]``; the section is named
+``blur-cause-<scene>`` (``blur-cause-<scene>-<T>`` with ``--tag``, so that a second set of variants keeps the first's
+section).
 """
 
 from __future__ import annotations
@@ -56,6 +63,12 @@ VARIANTS: dict[str, tuple[str, dict, str]] = {
     "eigs+-gt-norms": ("eigs+", {"grow_grad2d_renders": "norm_sum"}, "given"),
     "eigs+-gt-noevent": ("eigs+", {"method_options": {"event_loss": "none"}}, "given"),
     "eigs+-gt-latent2": ("eigs+", {"method_options": {"latent_weight": 2.0}}, "given"),
+    "eigs+-gt-latent4": ("eigs+", {"method_options": {"latent_weight": 4.0}}, "given"),
+    "eigs+-gt-latent8": ("eigs+", {"method_options": {"latent_weight": 8.0}}, "given"),
+    "eigs+-gt-latent2-dssim": ("eigs+", {"method_options": {"latent_weight": 2.0, "latent_dssim": True}}, "given"),
+    "eigs+-gt-latent4-dssim": ("eigs+", {"method_options": {"latent_weight": 4.0, "latent_dssim": True}}, "given"),
+    "eigs+-latent2": ("eigs+", {"method_options": {"latent_weight": 2.0}}, "sfm"),
+    "eigs+-latent4-dssim": ("eigs+", {"method_options": {"latent_weight": 4.0, "latent_dssim": True}}, "sfm"),
     "eigs+-gt-floor0": ("eigs+", {"method_options": {"discrete_floor": 0.0}}, "given"),
     "eigs+-gt-noade": ("eigs+", {"method_options": {"ade": False, "pose_prior": False, "consistency": False}},
                        "given"),
@@ -156,6 +169,7 @@ def main() -> None:
     ap.add_argument("--bins", type=int, default=4)
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--work", type=Path, default=None, help="where the runs go (default results/bench/blur_cause/…)")
+    ap.add_argument("--tag", default="", help="section blur-cause-<scene>-<tag> (default: blur-cause-<scene>)")
     add_out_argument(ap)
     args = ap.parse_args()
     cfg = yaml.safe_load(args.config.read_text())
@@ -192,7 +206,10 @@ def main() -> None:
         f"(coherence {targets['latent_coherence']:.2f}; power above the coherence's square is power the ground "
         f"truth does not explain: noise); EDI's estimated blur extent {targets['blur_extent_px']:.1f} px."
     )
-    write_section(f"blur-cause-{scene}", f"What keeps the renders smooth: {scene} (issue 43)", body,
+    name, title = f"blur-cause-{scene}", f"What keeps the renders smooth: {scene} (issue 43)"
+    if args.tag:
+        name, title = f"{name}-{args.tag}", f"{title[:-1]}, {args.tag})"
+    write_section(name, title, body,
                   data={"variants": got, "targets": targets}, out=args.out)
 
 

@@ -9,14 +9,17 @@ from eigs.metrics.pixel import ssim_torch
 
 
 def photometric_loss(image: Tensor, target: Tensor, lambda_dssim: float = 0.2) -> tuple[Tensor, Tensor, Tensor]:
-    """``image``, ``target``: (H, W, C) in [0, 1]. Returns (loss, l1, dssim), each a scalar tensor.
+    """``image``, ``target``: (H, W, C) or a stack (K, H, W, C) in [0, 1]. Returns (loss, l1, dssim), each a scalar
+    tensor; of a stack, the mean of its K images' terms.
 
     ``lambda_dssim = 0`` skips the SSIM (its cost is a few convolutions per channel).
     """
     if image.shape != target.shape:
         raise ValueError(f"image {tuple(image.shape)} and target {tuple(target.shape)} differ")
+    if image.dim() not in (3, 4):
+        raise ValueError(f"expected (H, W, C) or (K, H, W, C), got {tuple(image.shape)}")
     l1 = (image - target).abs().mean()
     if lambda_dssim == 0:
         return l1, l1, torch.zeros((), dtype=l1.dtype)
-    dssim = 1.0 - ssim_torch(image.permute(2, 0, 1), target.permute(2, 0, 1))
+    dssim = 1.0 - ssim_torch(image.movedim(-1, -3), target.movedim(-1, -3))  # (…, C, H, W)
     return (1.0 - lambda_dssim) * l1 + lambda_dssim * dssim, l1, dssim

@@ -253,9 +253,10 @@ class MultiRender(Method):
             ev = e2nerf_event_loss(logs, self.events.counts[v])
             loss = loss + o.lambda_event * ev
             terms["event"] = ev.item()
-        if self.latent is not None:
-            ok = self.valid[v].to(stack.device)  # a latent frame without a pose has no render of its own time
-            lat = (stack[ok] - self.latent[v][ok]).abs().mean()
+        ok = self.valid[v].to(stack.device) if self.latent is not None else None
+        if ok is not None and bool(ok.any()):  # a latent frame without a pose has no render of its own time
+            lam = self.cfg.lambda_dssim if o.latent_dssim else 0.0
+            lat, _, _ = photometric_loss(stack[ok], self.latent[v][ok], lam)
             loss = loss + o.latent_weight * lat
             terms["latent"] = lat.item()
         if o.consistency and dx is not None:

@@ -68,6 +68,10 @@ class MultiRenderOptions(Options):
     # event-integration loss constrains only differences of consecutive renders, this ties each render to the frame
     # the events and the blurry frame imply for its time (no extra renders)
     latent_weight: float = 0.0
+    # beyond the paper: the latent term as edi-3dgs's photometric loss, (1 − lambda_dssim)·L1 + lambda_dssim·D-SSIM
+    # over the latent renders, instead of L1 alone (the D-SSIM asks for local contrast, which L1 on dark frames barely
+    # weighs; issue 43, docs/results.md "Why eigs+ renders smooth")
+    latent_dssim: bool = False
     ade_zero_last: bool = False  # beyond the paper: the ADE's last layer starts at zero (no displacement at step 0)
     sharp_one_render: bool = True  # views EDI marks sharp (too few events) use one render and the photometric loss
 
