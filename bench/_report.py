@@ -46,7 +46,12 @@ def machine() -> str:
 
 
 def timed(cmd: list[str], log: Path) -> float:
-    """Wall seconds of ``cmd`` (its output to ``log``); a failure stops the script with the log's tail."""
+    """Wall seconds of ``cmd`` (its output to ``log``); a failure stops the script with the log's tail. A command
+    installed beside the running interpreter (``eigs`` in .venv/bin) is taken from there, so that a script run as
+    ``.venv/bin/python bench/….py`` needs no activated environment."""
+    beside = Path(sys.executable).parent / cmd[0]
+    if os.sep not in cmd[0] and beside.is_file():
+        cmd = [str(beside), *cmd[1:]]
     t = time.perf_counter()
     with log.open("w") as f:
         proc = subprocess.run(cmd, stdout=f, stderr=subprocess.STDOUT, check=False)
