@@ -15,7 +15,8 @@ A view *fails* when its path error exceeds :data:`MAX_PATH_ERROR` or its turn er
 (on the ground-truth paths of the built-ins no view exceeds 0.5 step or 5.7°, on the default suite's reconstructions
 0.6 step or 7.1°: docs/sfm.md, "Self-check"). Failing views are peeled one at a time, worst first (a wrong view also
 spoils its neighbours' predictions), and the rest judged again without them; then the path is cut where its two
-sides do not join, and the views outside its largest piece fail too. The reconstruction *fails* as a whole when more
+sides do not join, and its smallest piece fails, one piece at a time, until the rest joins as one path (the gap a
+dropped piece leaves is judged as any other). The reconstruction *fails* as a whole when more
 than :data:`MAX_FAILED_FRACTION` of the recording's views end without a place on the path (failed, or without a pose at
 all) — a path broken into pieces or covering too little of the recording, not a few stray views — or when COLMAP
 split the images into several models of which the second holds more than :data:`MAX_SECOND_MODEL` of the first's
@@ -164,17 +165,21 @@ def _judge(centres, rots, times, keep: np.ndarray, interval: float) -> tuple[np.
     return path, turn
 
 
-def _pieces(centres, rots, times, keep: np.ndarray, interval: float) -> list[np.ndarray]:
+def _pieces(
+    centres, rots, times, keep: np.ndarray, interval: float, bridged: frozenset = frozenset()
+) -> list[np.ndarray]:
     """``keep`` (time order) cut where the path breaks: at a gap between two consecutive views whose sides disagree —
     the path extrapolated forward from the two views before the gap and backward from the two after it meet more than
     :data:`MAX_PATH_ERROR` steps or :data:`MAX_TURN_DEG` apart at the gap's middle. A gap longer than the neighbour
-    limit, or one without two close views on each side, is not judged (nothing there to compare)."""
+    limit, or one without two close views on each side, is not judged (nothing there to compare), except a gap
+    after a view of ``bridged``: one that dropped views opened, which must join as any other."""
     max_gap = MAX_GAP_VIEWS * interval
     t = times[keep]
     step = _typical_step(centres, times, keep, interval)
     cuts = []
     for j in range(1, keep.size - 2):
-        if t[j + 1] - t[j] > max_gap or t[j] - t[j - 1] > max_gap or t[j + 2] - t[j + 1] > max_gap:
+        wide = t[j + 1] - t[j] > max_gap and int(keep[j]) not in bridged
+        if wide or t[j] - t[j - 1] > max_gap or t[j + 2] - t[j + 1] > max_gap:
             continue
         mid = 0.5 * (t[j] + t[j + 1])
         c1, R1 = predict(centres, rots, times, keep[j - 1], keep[j], mid)
@@ -215,12 +220,22 @@ def self_check(c2w: np.ndarray, registered: np.ndarray, t_us: np.ndarray, models
         keep = keep[keep != worst]
         path, turn = _judge(centres, rots, times, keep, interval)
     peeled_too_many = len(failed) > budget
-    pieces = [keep]
+    pieces = split = [keep]
     if not peeled_too_many and keep.size >= MIN_VIEWS:
-        pieces = _pieces(centres, rots, times, keep, interval)
-        if len(pieces) > 1:  # the largest piece is the path; views of the others leave it
-            largest = max(range(len(pieces)), key=lambda i: (pieces[i].size, -i))
-            failed += [int(v) for i, piece in enumerate(pieces) if i != largest for v in piece]
+        pieces = split = _pieces(centres, rots, times, keep, interval)
+        bridged: set[int] = set()
+        # the smallest piece leaves the path, one at a time, and the rest is cut again: a few wrong views in the
+        # middle split the path in three, and the two sides may join once they are gone (the gap they leave is
+        # judged as any other)
+        while len(pieces) > 1 and len(failed) <= budget:
+            smallest = min(range(len(pieces)), key=lambda i: (pieces[i].size, -i))
+            gone = pieces[smallest]
+            failed += [int(v) for v in gone]
+            if smallest > 0:
+                bridged.add(int(pieces[smallest - 1][-1]))
+            keep = np.concatenate([p for i, p in enumerate(pieces) if i != smallest])
+            pieces = _pieces(centres, rots, times, keep, interval, frozenset(bridged)) if keep.size >= MIN_VIEWS \
+                else [keep]  # fmt: skip
     for v, (p, t) in peeled.items():
         path[v], turn[v] = p, t
     out = SelfCheck(path, turn, failed_views=failed)
@@ -236,10 +251,10 @@ def self_check(c2w: np.ndarray, registered: np.ndarray, t_us: np.ndarray, models
             f"neighbours in time give, and {n_views - has.size} have none ({limit})"
         )
     elif len(failed) > budget:
-        sizes = ", ".join(str(p.size) for p in pieces)
+        sizes = ", ".join(str(p.size) for p in split)
         out.reasons.append(
-            f"the camera path breaks into {len(pieces)} pieces of {sizes} views that do not join: "
-            f"{len(failed) + n_views - has.size} of {n_views} views lie outside the largest or have no pose ({limit})"
+            f"the camera path breaks into {len(split)} pieces of {sizes} views that do not join: "
+            f"{len(failed) + n_views - has.size} of {n_views} views lie off the path or have no pose ({limit})"
         )
     if models and len(models) > 1 and models[1] > MAX_SECOND_MODEL * models[0]:
         out.reasons.append(
