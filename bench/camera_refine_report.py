@@ -105,6 +105,24 @@ def report(docs: dict[tuple[str, str], dict]) -> tuple[str, dict]:
     return "\n".join(body), data
 
 
+def machines(ledgers: list[Path]) -> str:
+    """A line naming the machine of each scene's trainings, from the ledgers' jobs.csv ('' without any)."""
+    import csv
+
+    seen: dict[str, set[str]] = {}
+    for path in ledgers:
+        if path.is_file():
+            for job in csv.DictReader(path.open()):
+                kind, scene, _ = job["job"].split(":", 2)
+                if kind == "train":
+                    seen.setdefault(job["machine"].split(",")[0], set()).add(scene)
+    if not seen:
+        return ""
+    parts = [f"{m}: {', '.join(sorted(s))}" for m, s in sorted(seen.items())]
+    lead = "\n\nMachines of the trainings (the ledger's jobs.csv; each pair of runs on one machine): "
+    return lead + "; ".join(parts) + "."
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--results", type=Path, nargs="+", default=[Path("results")],
@@ -116,6 +134,7 @@ def main() -> None:
     if not docs:
         raise SystemExit(f"camera_refine_report.py: no metrics.json of the study's runs under {args.results}")
     body, data = report(docs)
+    body += machines([r.parent / "jobs.csv" for r in roots])
     write_section("camera-refine", "Camera refinement in training: both protocols (issue 44)", body, data, args.out)
 
 
