@@ -217,10 +217,9 @@ def main() -> None:
         f"(coherence {targets['latent_coherence']:.2f}; power above the coherence's square is power the ground "
         f"truth does not explain: noise); EDI's estimated blur extent {targets['blur_extent_px']:.1f} px."
     )
-    name, title = f"blur-cause-{scene}", f"What keeps the renders smooth: {scene} (issue 43)"
-    if args.tag:
-        name, title = f"{name}-{args.tag}", f"{title[:-1]}, {args.tag})"
-    write_section(name, title, body,
+    suffix = f"-{args.tag}" if args.tag else ""
+    title = f"What keeps the renders smooth: {scene} (issue 43{', ' + args.tag if args.tag else ''})"
+    write_section(f"blur-cause-{scene}{suffix}", title, body,
                   data={"variants": got, "targets": targets}, out=args.out)
 
 

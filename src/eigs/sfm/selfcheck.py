@@ -220,7 +220,7 @@ def self_check(c2w: np.ndarray, registered: np.ndarray, t_us: np.ndarray, models
         keep = keep[keep != worst]
         path, turn = _judge(centres, rots, times, keep, interval)
     peeled_too_many = len(failed) > budget
-    pieces = split = [keep]
+    split = [keep]  # the path's pieces as first cut (the message names them)
     if not peeled_too_many and keep.size >= MIN_VIEWS:
         pieces = split = _pieces(centres, rots, times, keep, interval)
         bridged: set[int] = set()
@@ -234,8 +234,7 @@ def self_check(c2w: np.ndarray, registered: np.ndarray, t_us: np.ndarray, models
             if smallest > 0:
                 bridged.add(int(pieces[smallest - 1][-1]))
             keep = np.concatenate([p for i, p in enumerate(pieces) if i != smallest])
-            pieces = _pieces(centres, rots, times, keep, interval, frozenset(bridged)) if keep.size >= MIN_VIEWS \
-                else [keep]  # fmt: skip
+            pieces = _pieces(centres, rots, times, keep, interval, frozenset(bridged))
     for v, (p, t) in peeled.items():
         path[v], turn[v] = p, t
     out = SelfCheck(path, turn, failed_views=failed)

@@ -253,8 +253,9 @@ class MultiRender(Method):
             ev = e2nerf_event_loss(logs, self.events.counts[v])
             loss = loss + o.lambda_event * ev
             terms["event"] = ev.item()
-        ok = self.valid[v].to(stack.device) if self.latent is not None else None
-        if ok is not None and bool(ok.any()):  # a latent frame without a pose has no render of its own time
+        # a latent frame without a pose has no render of its own time (self.valid is on the CPU: no device sync)
+        if self.latent is not None and bool(self.valid[v].any()):
+            ok = self.valid[v].to(stack.device)
             lam = self.cfg.lambda_dssim if o.latent_dssim else 0.0
             lat, _, _ = photometric_loss(stack[ok], self.latent[v][ok], lam)
             loss = loss + o.latent_weight * lat
