@@ -56,7 +56,8 @@ def fmt(v: float, digits: int = 2, sign: bool = False) -> str:
     return f"{v:+.{digits}f}" if sign else f"{v:.{digits}f}"
 
 
-def report(docs: dict[tuple[str, str], dict]) -> tuple[str, dict]:
+def report(docs: dict[tuple[str, str], dict], trained_on: dict[tuple[str, str], str] | None = None) -> tuple[str, dict]:
+    """The section's text and data; ``trained_on``: (scene, run) → the machine its training ran on."""
     scenes = [s for s in SCENES if any((s, r) in docs for r in RUNS)]
     rows, data = [], {}
     for run in RUNS:
@@ -78,16 +79,20 @@ def report(docs: dict[tuple[str, str], dict]) -> tuple[str, dict]:
                          fmt(rec["novel_pose_opt.psnr"]), fmt(rec["novel_pose_opt.psnr.cam"]),
                          fmt(gain["novel_pose_opt"], sign=True),
                          fmt(rec["novel.lpips_alex"], 3), fmt(rec["novel.lpips_alex.cam"], 3),
-                         fmt(ate0), fmt(ate1), fmt(rot0), fmt(rot1)])  # fmt: skip
+                         fmt(ate0), fmt(ate1), fmt(rot0), fmt(rot1),
+                         machine_of(trained_on or {}, scene, run)])  # fmt: skip
     headers = ["run", "scene", "today's", "today's, cam", "gain", "test poses refined", "refined, cam", "gain",
-               "LPIPS", "LPIPS, cam", "ATE % before", "after", "rot ° before", "after"]  # fmt: skip
+               "LPIPS", "LPIPS, cam", "ATE % before", "after", "rot ° before", "after", "trained on"]  # fmt: skip
     body = [
         "Novel-view PSNR (dB) of each run as configured and with `camera_refine` (`-cam`) under both evaluation "
         "protocols (docs/evaluation.md): *today's* renders the test cameras SfM registered; *test poses refined* "
         "first refines each test camera against its image on the frozen model (100 iterations). LPIPS under today's "
         "protocol. ATE (% of the scene extent) and the median rotation error of the refined run's training cameras "
         "against the ground truth, before and after refinement (each set Sim(3)-aligned on its own). "
-        "Studies: config/camera_refine.yaml (128×96) and config/camera_refine_d346.yaml (346×260); one seed.",
+        "Studies: config/camera_refine.yaml (128×96) and config/camera_refine_d346.yaml (346×260); one seed. "
+        "'trained on': the machine of the row's two trainings (the ledger's jobs.csv). COLMAP reconstructs the same "
+        'inputs differently on different machines (docs/sfm.md, "d346-blocks on another machine"), so rows of one '
+        "scene trained on different machines stand on different SfM poses: compare a row's gain, not rows.",
         "",
         table(headers, rows),
     ]
@@ -105,22 +110,26 @@ def report(docs: dict[tuple[str, str], dict]) -> tuple[str, dict]:
     return "\n".join(body), data
 
 
-def machines(ledgers: list[Path]) -> str:
-    """A line naming the machine of each scene's trainings, from the ledgers' jobs.csv ('' without any)."""
+def trainings(ledgers: list[Path]) -> dict[tuple[str, str], str]:
+    """(scene, run) → the machine its training ran on (short name), from the ledgers' jobs.csv."""
     import csv
 
-    seen: dict[str, set[str]] = {}
+    out: dict[tuple[str, str], str] = {}
     for path in ledgers:
         if path.is_file():
             for job in csv.DictReader(path.open()):
-                kind, scene, _ = job["job"].split(":", 2)
+                kind, scene, run = job["job"].split(":", 2)
                 if kind == "train":
-                    seen.setdefault(job["machine"].split(",")[0], set()).add(scene)
-    if not seen:
-        return ""
-    parts = [f"{m}: {', '.join(sorted(s))}" for m, s in sorted(seen.items())]
-    lead = "\n\nMachines of the trainings (the ledger's jobs.csv; each pair of runs on one machine): "
-    return lead + "; ".join(parts) + "."
+                    name = job["machine"].split(",")[0].replace("(R)", "").replace(" Processor", "")
+                    out[(scene, run)] = " ".join(name.split())
+    return out
+
+
+def machine_of(trained_on: dict[tuple[str, str], str], scene: str, run: str) -> str:
+    """The machine of a row's pair of trainings ("A / B" where the two ran on different machines; – unknown)."""
+    names = [trained_on.get((scene, r)) for r in (run, f"{run}-cam")]
+    known = sorted({n for n in names if n})
+    return " / ".join(known) if known else "–"
 
 
 def main() -> None:
@@ -133,8 +142,7 @@ def main() -> None:
     docs = read(roots)
     if not docs:
         raise SystemExit(f"camera_refine_report.py: no metrics.json of the study's runs under {args.results}")
-    body, data = report(docs)
-    body += machines([r.parent / "jobs.csv" for r in roots])
+    body, data = report(docs, trainings([r.parent / "jobs.csv" for r in roots]))
     write_section("camera-refine", "Camera refinement in training: both protocols (issue 44)", body, data, args.out)
 
 
