@@ -111,17 +111,16 @@ def report(docs: dict[tuple[str, str], dict], trained_on: dict[tuple[str, str], 
 
 
 def trainings(ledgers: list[Path]) -> dict[tuple[str, str], str]:
-    """(scene, run) → the machine its training ran on (short name), from the ledgers' jobs.csv."""
-    import csv
+    """(scene, run) → the machine its training ran on (short name), from the ledgers' jobs.csv (none: empty)."""
+    from bench.suite_ledger import read_jobs_csv
 
     out: dict[tuple[str, str], str] = {}
-    for path in ledgers:
-        if path.is_file():
-            for job in csv.DictReader(path.open()):
-                kind, scene, run = job["job"].split(":", 2)
-                if kind == "train":
-                    name = job["machine"].split(",")[0].replace("(R)", "").replace(" Processor", "")
-                    out[(scene, run)] = " ".join(name.split())
+    for ledger in ledgers:
+        for job in read_jobs_csv(ledger):
+            kind, scene, run = job["job"].split(":", 2)
+            if kind == "train":
+                name = job["machine"].split(",")[0].replace("(R)", "").replace(" Processor", "")
+                out[(scene, run)] = " ".join(name.split())
     return out
 
 
@@ -142,7 +141,7 @@ def main() -> None:
     docs = read(roots)
     if not docs:
         raise SystemExit(f"camera_refine_report.py: no metrics.json of the study's runs under {args.results}")
-    body, data = report(docs, trainings([r.parent / "jobs.csv" for r in roots]))
+    body, data = report(docs, trainings([r.parent for r in roots]))
     write_section("camera-refine", "Camera refinement in training: both protocols (issue 44)", body, data, args.out)
 
 

@@ -17,6 +17,8 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw
 
+from eigs.util.image import write_png
+
 LABEL_PX = 16  # height of the label strip above each image
 
 
@@ -50,10 +52,7 @@ def main() -> None:
     first = Path(runs[0][1]) / "renders"
     panels = [panel(load(first / f"gt_{args.group}" / name), "ground truth", args.gain)]
     panels += [panel(load(Path(d) / "renders" / args.group / name), label, args.gain) for label, d in runs]
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = args.out.with_name(args.out.name + ".tmp.png")
-    Image.fromarray(np.concatenate(panels, axis=1)).save(tmp)
-    tmp.replace(args.out)
+    write_png(args.out, np.concatenate(panels, axis=1))  # atomic; makes the folder
     print(f"wrote {args.out}: {len(panels)} panels of view {args.view} ({args.group}), ×{args.gain:g}")
 
 

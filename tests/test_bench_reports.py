@@ -50,7 +50,7 @@ def test_the_report_names_the_machine_of_each_rows_two_trainings(tmp_path):
         'train:s:oracle-cam,x,1,1,1,"AMD EPYC, 2 cores",c,d\n'
         'evaluate:s:edi-3dgs,x,1,1,1,"Intel(R) Xeon(R) Processor, 2 cores",c,d\n'
     )
-    seen = camera_refine_report.trainings([jobs, tmp_path / "absent.csv"])
+    seen = camera_refine_report.trainings([tmp_path, tmp_path / "no-ledger"])
     assert seen == {("s", "eigs+"): "AMD EPYC", ("s", "eigs+-cam"): "AMD EPYC", ("s", "oracle"): "Intel Xeon",
                     ("s", "oracle-cam"): "AMD EPYC"}  # fmt: skip
     assert camera_refine_report.machine_of(seen, "s", "eigs+") == "AMD EPYC"
