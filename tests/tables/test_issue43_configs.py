@@ -1,7 +1,8 @@
 """The issue-43 studies measure their source config's runs: config/latent_dssim.yaml and config/latent_dssim_d346.yaml
 train `eigs+` exactly as config/config.yaml and config/davis346.yaml do, and `eigs+-ld` differing only in the
-sharp-frame term (weight and D-SSIM); config/ceiling_d346.yaml's `oracle-ceiling` is davis346's oracle trained on the
-3DGS reference implementation's schedule. All on the source's scenes and upstream stages (results/<scene>/b4/ shared)."""
+sharp-frame term (weight and D-SSIM); config/ceiling_d346.yaml's `oracle-ceiling` is davis346's oracle trained on
+the 3DGS reference implementation's schedule. All on the source's scenes and upstream stages (results/<scene>/b4/
+shared)."""
 
 from __future__ import annotations
 
