@@ -54,3 +54,21 @@ def test_the_ceiling_is_the_oracle_on_the_reference_schedule():
     assert ceiling["train.steps"] * ceiling["train.refine_stop_frac"] == 15000
     changed = differing(resolved(base["runs"]["oracle"]), ceiling)
     assert changed - {"train.eval_every", "train.checkpoint_every", "train.refine_stop_frac"} <= set(reference)
+
+
+def test_the_noisy_scenes_are_davis346s_with_frame_noise_and_its_runs():
+    base, study, candidate = load("davis346.yaml"), load("davis346_noise.yaml"), load("latent_dssim_d346.yaml")
+    assert {s.replace("d346n-", "d346-") for s in study["scenes"]} == set(base["scenes"])
+    for name, scene in study["scenes"].items():
+        clean = base["scenes"][name.replace("d346n-", "d346-")]
+        sim = scene["simulate"]
+        assert sim["overrides"].pop("frame_noise") == "davis346"
+        assert sim == clean["simulate"], name
+        assert scene["source"] == f"results/{name}/e2nerf-real" and scene["format"] == clean["format"]
+        assert scene["options"] == [o.replace("d346-", "d346n-") for o in clean["options"]]
+    for key in ("edi", "sfm", "threads", "init"):
+        assert study.get(key) == base.get(key), key
+    assert set(study["runs"]) == {"3dgs", "edi-3dgs", "eigs", "eigs+", "oracle", "eigs+-ld"}
+    for run, spec in study["runs"].items():
+        source = candidate if run == "eigs+-ld" else base
+        assert resolved(spec) == resolved(source["runs"][run]), run
