@@ -43,7 +43,10 @@ def test_loss_falls_psnr_rises_outputs_reload(data, tmp_path):
     assert np.mean(losses[-3:]) < 0.7 * np.mean(losses[:3])
     psnrs = [float(r["psnr_novel"]) for r in rows if r["psnr_novel"]]
     assert len(psnrs) == 3 and psnrs[-1] > init_psnr + 3.0, (init_psnr, psnrs)
-    assert {"step", "wall_s", "loss", "l1", "dssim", "n_gaussians", "psnr_novel", "psnr_blur"} <= set(rows[0])
+    assert {"step", "wall_s", "loss", "l1", "dssim", "n_gaussians", "psnr_novel", "psnr_blur", "sharpness_novel",
+            "coherence_novel"} <= set(rows[0])
+    sharp = [float(r["sharpness_novel"]) for r in rows if r["sharpness_novel"]]
+    assert len(sharp) == 3 and all(0 < v < 2 for v in sharp)
     assert int(rows[-1]["step"]) == 300 and float(rows[-1]["wall_s"]) > 0
     cloud = read_gaussian_ply(run / "model.ply")
     assert len(cloud) == len(res.model) == int(rows[-1]["n_gaussians"])

@@ -1,6 +1,6 @@
 """The run every trainer shares (Gaussian: :class:`eigs.train.gaussian.trainer.Trainer`, radiance field:
 :class:`eigs.train.field.trainer.FieldTrainer`): one step's frame with the non-finite skip, checkpoints and resumption,
-the step loop with its log and held-out PSNR, the result record and the run folder.
+the step loop with its log and held-out scores (PSNR, sharpness), the result record and the run folder.
 
 A trainer subclasses :class:`RunTrainer` and supplies the model's parts (its hooks): the loss of one step, the
 optimisers' zero-grad and step, what follows the backward pass, its checkpoint state, its held-out render, its log
@@ -34,6 +34,7 @@ from eigs import __version__
 from eigs.artifacts import run as run_folder
 from eigs.errors import EigsError
 from eigs.metrics.pixel import psnr_torch
+from eigs.metrics.sharpness import UndefinedSharpness, hf_scores
 from eigs.train.config import TrainConfig
 from eigs.train.data import HeldOut, TrainData
 from eigs.util.atomic import atomic_path
@@ -65,15 +66,31 @@ def finite_grads(params: list[torch.Tensor]) -> bool:
     return bool(torch.stack([torch.isfinite(g).all() for g in grads]).all())
 
 
+# train_log.csv's held-out columns, written every ``eval_every`` steps (after the trainer's own fixed columns)
+HELD_OUT_COLUMNS = ("psnr_novel", "psnr_blur", "sharpness_novel", "coherence_novel")
+
+
 @torch.no_grad()
-def psnr_by_kind(render: Callable[[int], torch.Tensor], held: HeldOut | None) -> dict[str, float]:
-    """Mean per-image PSNR (dB) of the 8-bit renders ``render(i)`` (H, W, C in [0, 1]) of the held-out images, by
-    kind: ``psnr_novel`` (novel views) and ``psnr_blur`` (blur views); NaN for a kind without images."""
-    out: dict[str, list[float]] = {"psnr_novel": [], "psnr_blur": []}
+def held_out_scores(render: Callable[[int], torch.Tensor], held: HeldOut | None) -> dict[str, float]:
+    """Scores of the 8-bit renders ``render(i)`` (H, W, C in [0, 1]) of the held-out images against their images:
+    the mean per-image PSNR (dB) by kind, ``psnr_novel`` (novel views) and ``psnr_blur`` (blur views), and on the
+    novel views the mean sharpness ratio and coherence (``sharpness_novel``, ``coherence_novel``:
+    :func:`eigs.metrics.sharpness.hf_scores`, what ``eigs evaluate`` reports; a view whose image has no power in the
+    band is left out, as there). NaN for a score without images."""
+    out: dict[str, list[float]] = {k: [] for k in HELD_OUT_COLUMNS}
     for i in range(len(held) if held is not None else 0):
         img = torch.round(render(i).clamp(0, 1) * 255.0) / 255.0
-        p = float(psnr_torch(img.permute(2, 0, 1).cpu(), held.images[i].permute(2, 0, 1)))  # type: ignore[union-attr]
-        out["psnr_novel" if held.kind[i] == 1 else "psnr_blur"].append(p)  # type: ignore[union-attr]
+        ref = held.images[i]  # type: ignore[union-attr]
+        p = float(psnr_torch(img.permute(2, 0, 1).cpu(), ref.permute(2, 0, 1)))
+        novel = held.kind[i] == 1  # type: ignore[union-attr]
+        out["psnr_novel" if novel else "psnr_blur"].append(p)
+        if novel:
+            try:
+                ratio, coherence = hf_scores(img.cpu().double().numpy(), ref.double().numpy())
+            except UndefinedSharpness:
+                continue
+            out["sharpness_novel"].append(ratio)
+            out["coherence_novel"].append(coherence)
     return {k: (float(np.mean(v)) if v else math.nan) for k, v in out.items()}
 
 
@@ -83,7 +100,7 @@ class RunTrainer(ABC):
 
     log: logging.Logger  # the subclass module's logger (tests and users filter by it)
     inputs_digest: str | None = None  # eigs.util.digest.files_digest of the run's input files (set by fit)
-    log_columns: tuple[str, ...]  # train_log.csv's fixed columns: step, wall_s, loss, the size, psnr_novel, psnr_blur
+    log_columns: tuple[str, ...]  # train_log.csv's fixed columns: step, wall_s, loss, the size, HELD_OUT_COLUMNS
 
     def _start(self, data: TrainData, cfg: TrainConfig, device: torch.device) -> None:
         """Set the run's state (step 0, no rows) and seed torch."""
@@ -135,7 +152,7 @@ class RunTrainer(ABC):
 
     @abstractmethod
     def held_out(self, step: int) -> dict[str, float]:
-        """Held-out PSNR at ``step`` (:func:`psnr_by_kind`)."""
+        """Held-out scores at ``step`` (:func:`held_out_scores`)."""
 
     @abstractmethod
     def size(self) -> dict[str, Any]:

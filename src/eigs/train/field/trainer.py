@@ -26,22 +26,22 @@ from eigs.train.config import TrainConfig
 from eigs.train.data import TrainData
 from eigs.train.field.methods import FieldMethod
 from eigs.train.field.model import FieldModel, field_box, lr_factor, voxel_schedule
-from eigs.train.loop import RunResult, RunTrainer, fit, psnr_by_kind
+from eigs.train.loop import HELD_OUT_COLUMNS, RunResult, RunTrainer, fit, held_out_scores
 from eigs.train.resolve import build_method
 from eigs.util.options import Options
 
 log = logging.getLogger(__name__)
 
-FIELD_LOG_COLUMNS = ("step", "wall_s", "loss", "n_voxels", "occupied", "psnr_novel", "psnr_blur")
+FIELD_LOG_COLUMNS = ("step", "wall_s", "loss", "n_voxels", "occupied", *HELD_OUT_COLUMNS)
 FIELD_STATE = ("model", "grid_opt", "method_opt", "method", "gen", "occupied")  # a field checkpoint's own keys
 
 
 @torch.no_grad()
 def field_held_out_psnr(model: FieldModel, data: TrainData, device: torch.device) -> dict[str, float]:
-    """Mean per-image PSNR (dB) of 8-bit renders at the held-out novel and blur views (NaN when none)."""
+    """Held-out scores of 8-bit renders (:func:`eigs.train.loop.held_out_scores`; NaN when none)."""
     held = data.held_out
     f = model.tensors() if held is not None else None
-    return psnr_by_kind(
+    return held_out_scores(
         lambda i: render_image(f, held.c2w[i], held.K[i].to(device), data.width, data.height, data.background), held
     )
 

@@ -27,7 +27,7 @@ from eigs.train.gaussian.camera_refine import CameraRefinement
 from eigs.train.gaussian.methods import Method
 from eigs.train.gaussian.model import PARAM_NAMES, GaussianModel, make_optimizer, means_lr, scene_extent
 from eigs.train.gaussian.strategy import DensifyStrategy
-from eigs.train.loop import RunResult, RunTrainer, fit, psnr_by_kind
+from eigs.train.loop import HELD_OUT_COLUMNS, RunResult, RunTrainer, fit, held_out_scores
 from eigs.train.resolve import build_method
 from eigs.util.options import Options
 from eigs.util.schedule import exp_decay
@@ -37,7 +37,7 @@ log = logging.getLogger(__name__)
 __all__ = ["LOG_COLUMNS", "RunResult", "Trainer", "held_out_psnr", "run_cameras", "run_motion", "train"]
 
 ADAM_STATE = ("step", "exp_avg", "exp_avg_sq")  # what torch.optim.Adam keeps per parameter (amsgrad off)
-LOG_COLUMNS = ("step", "wall_s", "loss", "n_gaussians", "psnr_novel", "psnr_blur")
+LOG_COLUMNS = ("step", "wall_s", "loss", "n_gaussians", *HELD_OUT_COLUMNS)
 
 
 def _adam_hyperparameters_valid(group: dict) -> bool:
@@ -53,9 +53,10 @@ def _adam_hyperparameters_valid(group: dict) -> bool:
 
 
 def held_out_psnr(model: GaussianModel, held: HeldOut, data: TrainData, sh_degree: int, device: torch.device) -> dict:
-    """Mean per-image PSNR (dB) of 8-bit renders on the held-out novel views and blur views (NaN when none)."""
+    """Held-out scores of 8-bit renders (:func:`eigs.train.loop.held_out_scores`: PSNR by kind, the novel views'
+    sharpness ratio and coherence; NaN when none)."""
     bg = data.background.to(device)
-    return psnr_by_kind(
+    return held_out_scores(
         lambda i: model.render(held.c2w[i], held.K[i].to(device), data.width, data.height, bg, sh_degree)[0], held
     )
 
