@@ -49,7 +49,7 @@ def test_the_ceiling_is_the_oracle_on_the_reference_schedule():
     # interval and threshold, opacity reset interval); our threshold is in the same NDC units (docs/training.md)
     reference = {"train.steps": 30000, "train.lr_means": 1.6e-4, "train.lr_means_final": 1.6e-6, "train.sh_degree": 3,
                  "train.refine_start": 500, "train.refine_every": 100, "train.grow_grad2d": 2e-4,
-                 "train.reset_every": 3000}
+                 "train.prune_opacity": 0.005, "train.reset_every": 3000}
     assert {k: ceiling[k] for k in reference} == reference
     assert ceiling["train.steps"] * ceiling["train.refine_stop_frac"] == 15000
     changed = differing(resolved(base["runs"]["oracle"]), ceiling)
