@@ -1,8 +1,8 @@
 """The issue-43 studies measure their source config's runs: config/latent_dssim.yaml and config/latent_dssim_d346.yaml
-train `eigs+` exactly as config/config.yaml and config/davis346.yaml do, and `eigs+-ld` differing only in the
-sharp-frame term (weight and D-SSIM); config/ceiling_d346.yaml's `oracle-ceiling` is davis346's oracle trained on
-the 3DGS reference implementation's schedule. All on the source's scenes and upstream stages (results/<scene>/b4/
-shared)."""
+train `eigs+` exactly as config/config.yaml and config/davis346.yaml do, and `eigs+-ld` (weight 4 and D-SSIM) and
+`eigs+-ds` (the D-SSIM alone) differing only in the sharp-frame term; config/ceiling_d346.yaml's `oracle-ceiling` is
+davis346's oracle trained on the 3DGS reference implementation's schedule; config/davis346_noise.yaml is davis346's
+scenes with frame noise and its runs. All on the source's scenes and upstream stages (results/<scene>/b4/ shared)."""
 
 from __future__ import annotations
 
@@ -20,6 +20,10 @@ def load(name: str) -> dict:
     return yaml.safe_load((REPO / "config" / name).read_text())
 
 
+# the candidates: their latent_weight and the options in which they differ from eigs+
+CANDIDATES = {"eigs+-ld": (4.0, {"latent_weight", "latent_dssim"}), "eigs+-ds": (0.5, {"latent_dssim"})}
+
+
 def same_upstream(base: dict, study: dict) -> None:
     assert all(study["scenes"][s] == base["scenes"][s] for s in study["scenes"])
     assert study["edi"]["bins"] == [4] and 4 in base["edi"]["bins"]
@@ -33,11 +37,13 @@ def test_the_candidate_differs_from_eigs_plus_only_in_the_sharp_frame_term(base_
     base, study = load(base_name), load(study_name)
     same_upstream(base, study)
     assert set(study["scenes"]) == set(base["scenes"])
-    for run in set(study["runs"]) - {"eigs+-ld"}:
+    for run in set(study["runs"]) - set(CANDIDATES):
         assert resolved(study["runs"][run]) == resolved(base["runs"][run]), run
-    plain, candidate = resolved(study["runs"]["eigs+"]), resolved(study["runs"]["eigs+-ld"])
-    assert differing(plain, candidate) == {"latent_weight", "latent_dssim"}
-    assert candidate["latent_weight"] == 4.0 and candidate["latent_dssim"] is True
+    plain = resolved(study["runs"]["eigs+"])
+    for run, (weight, changed) in CANDIDATES.items():
+        candidate = resolved(study["runs"][run])
+        assert differing(plain, candidate) == changed, run
+        assert candidate["latent_weight"] == weight and candidate["latent_dssim"] is True, run
 
 
 def test_the_ceiling_is_the_oracle_on_the_reference_schedule():
@@ -68,7 +74,7 @@ def test_the_noisy_scenes_are_davis346s_with_frame_noise_and_its_runs():
         assert scene["options"] == [o.replace("d346-", "d346n-") for o in clean["options"]]
     for key in ("edi", "sfm", "threads", "init"):
         assert study.get(key) == base.get(key), key
-    assert set(study["runs"]) == {"3dgs", "edi-3dgs", "eigs", "eigs+", "oracle", "eigs+-ld"}
+    assert set(study["runs"]) == {"3dgs", "edi-3dgs", "eigs", "eigs+", "oracle", *CANDIDATES}
     for run, spec in study["runs"].items():
-        source = candidate if run == "eigs+-ld" else base
+        source = candidate if run in CANDIDATES else base
         assert resolved(spec) == resolved(source["runs"][run]), run
