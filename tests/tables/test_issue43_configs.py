@@ -21,7 +21,8 @@ def load(name: str) -> dict:
 
 
 # the candidates: their latent_weight and the options in which they differ from eigs+
-CANDIDATES = {"eigs+-ld": (4.0, {"latent_weight", "latent_dssim"}), "eigs+-ds": (0.5, {"latent_dssim"})}
+CANDIDATES = {"eigs+-ld": (4.0, {"latent_weight", "latent_dssim"}), "eigs+-ds": (0.5, {"latent_dssim"}),
+              "eigs+-l2d": (2.0, {"latent_weight", "latent_dssim"})}
 
 
 def same_upstream(base: dict, study: dict) -> None:
@@ -37,6 +38,7 @@ def test_the_candidate_differs_from_eigs_plus_only_in_the_sharp_frame_term(base_
     base, study = load(base_name), load(study_name)
     same_upstream(base, study)
     assert set(study["scenes"]) == set(base["scenes"])
+    assert set(CANDIDATES) <= set(study["runs"])
     for run in set(study["runs"]) - set(CANDIDATES):
         assert resolved(study["runs"][run]) == resolved(base["runs"][run]), run
     plain = resolved(study["runs"]["eigs+"])
@@ -74,7 +76,7 @@ def test_the_noisy_scenes_are_davis346s_with_frame_noise_and_its_runs():
         assert scene["options"] == [o.replace("d346-", "d346n-") for o in clean["options"]]
     for key in ("edi", "sfm", "threads", "init"):
         assert study.get(key) == base.get(key), key
-    assert set(study["runs"]) == {"3dgs", "edi-3dgs", "eigs", "eigs+", "oracle", *CANDIDATES}
+    assert set(study["runs"]) == {"3dgs", "edi-3dgs", "eigs", "eigs+", "oracle", "eigs+-ld", "eigs+-ds"}
     for run, spec in study["runs"].items():
         source = candidate if run in CANDIDATES else base
         assert resolved(spec) == resolved(source["runs"][run]), run
