@@ -35,3 +35,45 @@ def test_shape_errors():
         photometric_loss(torch.zeros(4, 5, 3), torch.zeros(4, 6, 3))
     with pytest.raises(ValueError, match="expected"):
         photometric_loss(torch.zeros(5, 3), torch.zeros(5, 3))
+
+
+def test_ssim_range_is_ssim_of_the_images_divided_by_it():
+    """SSIM at data range L equals SSIM of x / L, y / L at range 1 (every term of the formula scales by 1/L²)."""
+    from eigs.metrics.pixel import ssim_torch
+
+    gen = torch.Generator().manual_seed(3)
+    x = 0.06 * torch.rand(2, 3, 24, 20, generator=gen, dtype=torch.float64)
+    y = 0.06 * torch.rand(2, 3, 24, 20, generator=gen, dtype=torch.float64)
+    for rng in (0.5, 0.1, 0.06):
+        got = ssim_torch(x, y, data_range=rng)
+        want = ssim_torch(x / rng, y / rng)
+        assert abs(float(got - want)) < 1e-12, rng
+    assert abs(float(ssim_torch(x, y, data_range=1.0) - ssim_torch(x, y))) == 0.0
+    for bad in (0.0, -1.0, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="data_range"):
+            ssim_torch(x, y, data_range=bad)
+
+
+def test_a_smaller_ssim_range_sees_the_contrast_of_a_dark_frame():
+    """A dark texture (mean 13/255, local spread ~1.5/255, as the DAVIS346-like frames) against a flat render of its
+    mean: at range 1 the constants swamp the contrast (D-SSIM near 0); at range 0.1 the missing texture costs."""
+    gen = torch.Generator().manual_seed(4)
+    target = (13.0 + 1.5 * torch.randn(96, 128, 3, generator=gen, dtype=torch.float64)) / 255.0
+    flat = torch.full_like(target, float(target.mean()))
+    _, _, d1 = photometric_loss(flat, target, 0.2, ssim_range=1.0)
+    _, _, d01 = photometric_loss(flat, target, 0.2, ssim_range=0.1)
+    # C2 = (0.03 L)²: 58.5 DN² at L = 1 against a variance of 2.25 DN² (for a flat render of the mean, away from the
+    # zero-padded border, 1 − SSIM = 1 − C2 / (σ² + C2): 0.037); at L = 0.1, C2 = 0.585 DN²: 1 − 0.585 / 2.835 = 0.79
+    assert float(d1) < 0.05 and 0.6 < float(d01) < 0.8
+    loss, l1, d = photometric_loss(flat, target, 0.2, ssim_range=0.1)
+    assert torch.allclose(loss, 0.8 * l1 + 0.2 * d)
+
+
+def test_train_config_checks_ssim_range():
+    from eigs.errors import EigsError
+    from eigs.train.config import TrainConfig
+
+    assert TrainConfig().ssim_range == 1.0
+    for bad in (0.0, 1.5, -0.2):
+        with pytest.raises(EigsError, match="ssim_range"):
+            TrainConfig.from_dict({"ssim_range": bad})

@@ -8,11 +8,14 @@ from torch import Tensor
 from eigs.metrics.pixel import ssim_torch
 
 
-def photometric_loss(image: Tensor, target: Tensor, lambda_dssim: float = 0.2) -> tuple[Tensor, Tensor, Tensor]:
+def photometric_loss(
+    image: Tensor, target: Tensor, lambda_dssim: float = 0.2, ssim_range: float = 1.0
+) -> tuple[Tensor, Tensor, Tensor]:
     """``image``, ``target``: (H, W, C) or a stack (K, H, W, C) in [0, 1]. Returns (loss, l1, dssim), each a scalar
     tensor; of a stack, the mean of its K images' terms.
 
-    ``lambda_dssim = 0`` skips the SSIM (its cost is a few convolutions per channel).
+    ``lambda_dssim = 0`` skips the SSIM (its cost is a few convolutions per channel). ``ssim_range``: the SSIM's data
+    range L (:func:`eigs.metrics.pixel.ssim_torch`; 1 as 3DGS, below 1 to see the contrast of dark frames).
     """
     if image.shape != target.shape:
         raise ValueError(f"image {tuple(image.shape)} and target {tuple(target.shape)} differ")
@@ -21,5 +24,5 @@ def photometric_loss(image: Tensor, target: Tensor, lambda_dssim: float = 0.2) -
     l1 = (image - target).abs().mean()
     if lambda_dssim == 0:
         return l1, l1, torch.zeros((), dtype=l1.dtype)
-    dssim = 1.0 - ssim_torch(image.movedim(-1, -3), target.movedim(-1, -3))  # (…, C, H, W)
+    dssim = 1.0 - ssim_torch(image.movedim(-1, -3), target.movedim(-1, -3), data_range=ssim_range)  # (…, C, H, W)
     return (1.0 - lambda_dssim) * l1 + lambda_dssim * dssim, l1, dssim

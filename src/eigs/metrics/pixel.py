@@ -139,15 +139,20 @@ def ssim_torch(
     window_size: int = 11,
     sigma: float = 1.5,
     reduction: str = "mean",
+    data_range: float = 1.0,
 ) -> torch.Tensor:
     """SSIM mode ``3dgs`` of tensors in [0, 1]: differentiable, separable Gaussian, zero padding.
 
     ``x``, ``y``: ``(N, C, H, W)`` or ``(C, H, W)``, any float dtype/device, any size >= 1x1.
     ``reduction="mean"``: a scalar, the mean over every pixel, channel and image (as 3DGS's ``ssim``);
     ``"none"``: ``(N,)`` per image (``()`` for 3-D input). D-SSIM for training is ``1 - ssim_torch(x, y)``.
+    ``data_range``: L in the constants C1 = (K1 L)², C2 = (K2 L)² (> 0; 1 for [0, 1] images, as 3DGS). The SSIM of
+    ``x``, ``y`` at range L equals that of ``x / L``, ``y / L`` at range 1 (every term scales by 1/L²).
     """
     if x.shape != y.shape:
         raise ValueError(f"shapes differ: {tuple(x.shape)} vs {tuple(y.shape)}")
+    if not (math.isfinite(data_range) and data_range > 0):
+        raise ValueError(f"data_range must be finite and > 0, got {data_range}")
     if x.dim() not in (3, 4):
         raise ValueError(f"expected (C, H, W) or (N, C, H, W), got {tuple(x.shape)}")
     batched = x.dim() == 4
@@ -155,7 +160,7 @@ def ssim_torch(
         x, y = x.unsqueeze(0), y.unsqueeze(0)
     n, c, h, w = x.shape
     window = gaussian_window(window_size, sigma, dtype=x.dtype).to(x.device)
-    smap = _ssim_map(x.reshape(n * c, h, w), y.reshape(n * c, h, w), window, "zeros", 1.0, 1.0)
+    smap = _ssim_map(x.reshape(n * c, h, w), y.reshape(n * c, h, w), window, "zeros", data_range, 1.0)
     if reduction == "mean":
         return smap.mean()
     if reduction == "none":

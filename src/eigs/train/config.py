@@ -42,6 +42,9 @@ class TrainConfig(Options):
     lr_scales: float = 5e-3
     lr_quats: float = 1e-3
     lambda_dssim: float = 0.2
+    # the data range L of the training loss's SSIM constants, C1 = (0.01 L)², C2 = (0.03 L)², images in [0, 1]: 1 as
+    # 3DGS; below 1 for dark frames, whose local contrast the constants would otherwise swamp (docs/training.md)
+    ssim_range: float = 1.0
     # camera refinement, Gaussian methods only (eigs.train.gaussian.camera_refine: a learned SE(3) correction per
     # training view; its schedule and regulariser are BAD-Gaussians', docs/training.md "Camera refinement")
     camera_refine: bool = False
@@ -78,6 +81,7 @@ class TrainConfig(Options):
             (0 <= self.sh_degree <= 3, "sh_degree must lie in 0..3"),
             (self.sh_degree_interval >= 1, "sh_degree_interval must be >= 1"),
             (0 <= self.lambda_dssim <= 1, "lambda_dssim must lie in [0, 1]"),
+            (0 < self.ssim_range <= 1, "ssim_range must lie in (0, 1]"),
             (self.refine_every >= 1, "refine_every must be >= 1"),
             (0 <= self.refine_stop_frac <= 1, "refine_stop_frac must lie in [0, 1]"),
             (self.log_every >= 1 and self.checkpoint_every >= 1, "log_every and checkpoint_every must be >= 1"),

@@ -136,7 +136,7 @@ class TrajectoryMethod(Method):
             infos.append(info)
         stack = torch.stack(images)  # (n_virtual, H, W, C)
         blur = from_linear(to_linear(stack, self.response).mean(dim=0), self.response)
-        loss, l1, dssim = photometric_loss(blur, self.blurry[v], self.cfg.lambda_dssim)
+        loss, l1, dssim = photometric_loss(blur, self.blurry[v], self.cfg.lambda_dssim, self.cfg.ssim_range)
         loss = o.lambda_blur * loss
         terms = {"l1": l1.item(), "dssim": dssim.item()}
         if o.event_loss != "none":

@@ -236,7 +236,7 @@ class MultiRender(Method):
         w = self.blur_weights(len(images)).to(stack).reshape(-1, 1, 1, 1)
         blur = from_linear((to_linear(stack, self.response) * w).sum(dim=0), self.response)
         stack = stack[latent_pos]  # the N+1 latent renders for the event losses
-        loss, l1, dssim = photometric_loss(blur, self.blurry[v], self.cfg.lambda_dssim)
+        loss, l1, dssim = photometric_loss(blur, self.blurry[v], self.cfg.lambda_dssim, self.cfg.ssim_range)
         terms = {"l1": l1.item(), "dssim": dssim.item()}
         if o.event_loss == "eigs":
             logs = log_intensity(stack, self.response, self.events.mode)  # (L, H, W)
@@ -257,7 +257,7 @@ class MultiRender(Method):
         if self.latent is not None and bool(self.valid[v].any()):
             ok = self.valid[v].to(stack.device)
             lam = self.cfg.lambda_dssim if o.latent_dssim else 0.0
-            lat, _, _ = photometric_loss(stack[ok], self.latent[v][ok], lam)
+            lat, _, _ = photometric_loss(stack[ok], self.latent[v][ok], lam, self.cfg.ssim_range)
             loss = loss + o.latent_weight * lat
             terms["latent"] = lat.item()
         if o.consistency and dx is not None:

@@ -109,7 +109,7 @@ class Method(ABC):
             raise EigsError(self.data.scene.name, f"method {self.name} does not name its samples' views: it cannot "
                                                   "refine cameras (camera_refine)")  # fmt: skip
         image, info = self.render_view(model, view, c2w, sh_degree)
-        loss, l1, dssim = photometric_loss(image, target, self.cfg.lambda_dssim)
+        loss, l1, dssim = photometric_loss(image, target, self.cfg.lambda_dssim, self.cfg.ssim_range)
         return StepOutput(loss, {"l1": l1.item(), "dssim": dssim.item()}, [info])
 
     def param_groups(self) -> list[dict]:
