@@ -22,7 +22,8 @@ def load(name: str) -> dict:
 
 # the candidates: their latent_weight and the options in which they differ from eigs+
 CANDIDATES = {"eigs+-ld": (4.0, {"latent_weight", "latent_dssim"}), "eigs+-ds": (0.5, {"latent_dssim"}),
-              "eigs+-l2d": (2.0, {"latent_weight", "latent_dssim"})}
+              "eigs+-l2d": (2.0, {"latent_weight", "latent_dssim"}),
+              "eigs+-dsr": (0.5, {"latent_dssim", "train.ssim_range"})}
 
 
 def same_upstream(base: dict, study: dict) -> None:
