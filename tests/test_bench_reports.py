@@ -1,8 +1,11 @@
-"""bench/render_compare.py and bench/camera_refine_report.py: the panels are the renders times the gain, clipped,
-in the order given after the ground truth; the report names the machine of each row's two trainings."""
+"""bench/render_compare.py, bench/camera_refine_report.py and bench/latent_dssim_report.py: the panels are the renders
+times the gain, clipped, in the order given after the ground truth; the camera report names the machine of each row's
+two trainings; the latent report's margins and means against eigs+ are those of hand-made metrics."""
 
 from __future__ import annotations
 
+import json
+import math
 import subprocess
 import sys
 from pathlib import Path
@@ -12,7 +15,7 @@ from PIL import Image
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-from bench import camera_refine_report, render_compare  # noqa: E402
+from bench import camera_refine_report, latent_dssim_report, render_compare  # noqa: E402
 
 
 def test_a_panel_is_the_image_times_the_gain_clipped_under_its_label():
@@ -56,3 +59,32 @@ def test_the_report_names_the_machine_of_each_rows_two_trainings(tmp_path):
     assert camera_refine_report.machine_of(seen, "s", "eigs+") == "AMD EPYC"
     assert camera_refine_report.machine_of(seen, "s", "oracle") == "AMD EPYC / Intel Xeon"
     assert camera_refine_report.machine_of(seen, "s", "edi-3dgs") == "–"  # evaluated, never trained here
+
+
+def _metrics(root: Path, scene: str, run: str, psnr: float, lpips: float, cpu: float | None) -> None:
+    ev = root / scene / "b4" / "eval" / run
+    ev.mkdir(parents=True)
+    doc = {"metrics": {"novel": {"psnr": psnr, "ssim_3dgs": 0.9, "lpips_alex": lpips, "coherence": 0.5},
+                       "all": {"brisque": 40.0}}, "n_gaussians": 1000, "train_seconds": 99.0}  # fmt: skip
+    (ev / "metrics.json").write_text(json.dumps(doc))
+    if cpu is not None:
+        (root / scene / "b4" / run).mkdir(parents=True)
+        (root / scene / "b4" / run / "config.json").write_text(json.dumps({"run": {"process_cpu_s": cpu}}))
+
+
+def test_the_latent_report_closes_margins_and_averages_against_eigs_plus(tmp_path):
+    for run, psnr, lpips, cpu in (("edi-3dgs", 30.0, 0.20, 10.0), ("oracle", 32.0, 0.10, 10.0),
+                                  ("eigs+", 31.0, 0.25, 100.0), ("eigs+-ds", 31.5, 0.15, 150.0)):  # fmt: skip
+        _metrics(tmp_path, "d346-x", run, psnr, lpips, cpu)
+    for scene, base, cand in (("a", 28.0, 28.4), ("b", 30.0, 29.8)):
+        _metrics(tmp_path, scene, "eigs+", base, 0.06, 100.0)
+        _metrics(tmp_path, scene, "eigs+-ld", cand, 0.05, None)  # no run folder: no CPU seconds
+    _metrics(tmp_path, "c", "eigs+-ld", 27.0, 0.05, None)  # no eigs+ on c: left out of the means
+    text, data = latent_dssim_report.report(latent_dssim_report.read([tmp_path]))
+    assert data["d346-x/eigs+"]["margin"] == 0.5 and data["d346-x/eigs+-ds"]["margin"] == 0.75
+    assert data["d346-x/oracle"]["margin"] == 1.0
+    assert abs(data["346×260/eigs+-ds-minus-eigs+"]["lpips_alex"] + 0.10) < 1e-12
+    assert data["346×260/eigs+-ds-minus-eigs+"]["train_ratio"] == 1.5
+    mean = data["128×96/eigs+-ld-minus-eigs+"]
+    assert mean["scenes"] == 2 and abs(mean["psnr"] - 0.1) < 1e-12 and math.isnan(mean["train_ratio"])
+    assert "| d346-x | `eigs+-ds` | 31.50 |" in text and "75 %" in text
