@@ -72,6 +72,17 @@ def add_out_argument(ap: argparse.ArgumentParser) -> None:
     )
 
 
+def results_roots(ap: argparse.ArgumentParser) -> tuple[argparse.Namespace, list[Path]]:
+    """Parse ``--results DIR ...`` (results folders or suite ledgers holding ``<scene>/b4/eval/<run>/metrics.json``;
+    default ``results``) and ``--out``; returns the arguments and the folders that hold the scenes (a ledger's
+    ``results/``)."""
+    ap.add_argument("--results", type=Path, nargs="+", default=[Path("results")],
+                    help="results folders or suite ledgers holding <scene>/b4/eval/<run>/metrics.json")  # fmt: skip
+    add_out_argument(ap)
+    args = ap.parse_args()
+    return args, [r / "results" if (r / "results").is_dir() else r for r in args.results]
+
+
 def _atomic_write(path: Path, text: str) -> None:
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_text(text)

@@ -21,7 +21,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from bench._report import add_out_argument, table, write_section  # noqa: E402
+from bench._report import results_roots, table, write_section  # noqa: E402
 
 RUNS = ("edi-3dgs", "eigs+", "oracle")
 SCENES = ("blocks", "chair", "dish", "drums", "spheres", "tree", "d346-blocks", "d346-chair", "d346-drums")
@@ -132,12 +132,7 @@ def machine_of(trained_on: dict[tuple[str, str], str], scene: str, run: str) -> 
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--results", type=Path, nargs="+", default=[Path("results")],
-                    help="results folders or suite ledgers holding <scene>/b4/eval/<run>/metrics.json")  # fmt: skip
-    add_out_argument(ap)
-    args = ap.parse_args()
-    roots = [r / "results" if (r / "results").is_dir() else r for r in args.results]
+    args, roots = results_roots(argparse.ArgumentParser(description=__doc__.splitlines()[0]))
     docs = read(roots)
     if not docs:
         raise SystemExit(f"camera_refine_report.py: no metrics.json of the study's runs under {args.results}")

@@ -22,7 +22,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from bench._report import add_out_argument, table, write_section  # noqa: E402
+from bench._report import results_roots, table, write_section  # noqa: E402
 
 # the run names of the studies, in the order of the tables, and what each changes in eigs+
 RUNS = {
@@ -126,12 +126,7 @@ def report(docs: dict[tuple[str, str], dict]) -> tuple[str, dict]:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--results", type=Path, nargs="+", default=[Path("results")],
-                    help="results folders or suite ledgers holding <scene>/b4/eval/<run>/metrics.json")  # fmt: skip
-    add_out_argument(ap)
-    args = ap.parse_args()
-    roots = [r / "results" if (r / "results").is_dir() else r for r in args.results]
+    args, roots = results_roots(argparse.ArgumentParser(description=__doc__.splitlines()[0]))
     text, data = report(read(roots))
     write_section("latent-dssim", "Which sharp-frame term for eigs+ (issue 43)", text, data, args.out)
 
