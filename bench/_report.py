@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import datetime as _dt
 import json
+import math
 import os
 import platform
 import re
@@ -114,6 +115,13 @@ def write_section(name: str, title: str, body: str, data: object = None, out: Pa
     tmp = DOC.with_suffix(".md.tmp")
     tmp.write_text(text)
     os.replace(tmp, DOC)
+
+
+def fixed(v: float, digits: int = 2, sign: bool = False) -> str:
+    """``v`` with ``digits`` decimals (``sign``: always signed); "–" where it is not finite (not measured)."""
+    if not math.isfinite(v):
+        return "–"
+    return f"{v:+.{digits}f}" if sign else f"{v:.{digits}f}"
 
 
 def table(headers: list[str], rows: list[list[object]]) -> str:

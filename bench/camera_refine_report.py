@@ -21,7 +21,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from bench._report import results_roots, table, write_section  # noqa: E402
+from bench._report import fixed, results_roots, table, write_section  # noqa: E402
 
 RUNS = ("edi-3dgs", "eigs+", "oracle")
 SCENES = ("blocks", "chair", "dish", "drums", "spheres", "tree", "d346-blocks", "d346-chair", "d346-drums")
@@ -50,12 +50,6 @@ def cameras(doc: dict | None, when: str) -> tuple[float, float]:
     return float(c.get("ate_percent_of_extent", math.nan)), float(c.get("rotation_error_deg_median", math.nan))
 
 
-def fmt(v: float, digits: int = 2, sign: bool = False) -> str:
-    if not math.isfinite(v):
-        return "–"
-    return f"{v:+.{digits}f}" if sign else f"{v:.{digits}f}"
-
-
 def report(docs: dict[tuple[str, str], dict], trained_on: dict[tuple[str, str], str] | None = None) -> tuple[str, dict]:
     """The section's text and data; ``trained_on``: (scene, run) → the machine its training ran on."""
     scenes = [s for s in SCENES if any((s, r) in docs for r in RUNS)]
@@ -75,11 +69,11 @@ def report(docs: dict[tuple[str, str], dict], trained_on: dict[tuple[str, str], 
             data[f"{scene}/{run}"] = rec
             gain = {g: rec[f"{g}.psnr.cam"] - rec[f"{g}.psnr"] for g in PROTOCOLS}
             rows.append([f"`{run}`", scene,
-                         fmt(rec["novel.psnr"]), fmt(rec["novel.psnr.cam"]), fmt(gain["novel"], sign=True),
-                         fmt(rec["novel_pose_opt.psnr"]), fmt(rec["novel_pose_opt.psnr.cam"]),
-                         fmt(gain["novel_pose_opt"], sign=True),
-                         fmt(rec["novel.lpips_alex"], 3), fmt(rec["novel.lpips_alex.cam"], 3),
-                         fmt(ate0), fmt(ate1), fmt(rot0), fmt(rot1),
+                         fixed(rec["novel.psnr"]), fixed(rec["novel.psnr.cam"]), fixed(gain["novel"], sign=True),
+                         fixed(rec["novel_pose_opt.psnr"]), fixed(rec["novel_pose_opt.psnr.cam"]),
+                         fixed(gain["novel_pose_opt"], sign=True),
+                         fixed(rec["novel.lpips_alex"], 3), fixed(rec["novel.lpips_alex.cam"], 3),
+                         fixed(ate0), fixed(ate1), fixed(rot0), fixed(rot1),
                          machine_of(trained_on or {}, scene, run)])  # fmt: skip
     headers = ["run", "scene", "today's", "today's, cam", "gain", "test poses refined", "refined, cam", "gain",
                "LPIPS", "LPIPS, cam", "ATE % before", "after", "rot ° before", "after", "trained on"]  # fmt: skip
@@ -103,8 +97,8 @@ def report(docs: dict[tuple[str, str], dict], trained_on: dict[tuple[str, str], 
                          for s in names if f"{s}/{run}" in data] for g in PROTOCOLS}  # fmt: skip
             gains = {g: [x for x in v if math.isfinite(x)] for g, v in gains.items()}
             if any(gains.values()):
-                parts = [f"{label} {fmt(min(gains[g]), sign=True)} to {fmt(max(gains[g]), sign=True)} dB "
-                         f"(mean {fmt(sum(gains[g]) / len(gains[g]), sign=True)}, {len(gains[g])} scenes)"
+                parts = [f"{label} {fixed(min(gains[g]), sign=True)} to {fixed(max(gains[g]), sign=True)} dB "
+                         f"(mean {fixed(sum(gains[g]) / len(gains[g]), sign=True)}, {len(gains[g])} scenes)"
                          for g, label in PROTOCOLS.items() if gains[g]]  # fmt: skip
                 body.append(f"\n`{run}` at {suite}, gain of the switch: " + "; ".join(parts) + ".")
     return "\n".join(body), data

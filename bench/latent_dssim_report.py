@@ -22,7 +22,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from bench._report import results_roots, table, write_section  # noqa: E402
+from bench._report import fixed, results_roots, table, write_section  # noqa: E402
 
 # the run names of the studies, in the order of the tables, and what each changes in eigs+
 RUNS = {
@@ -66,12 +66,6 @@ def margin_closed(run: float, edi: float, oracle: float) -> float:
     return (run - edi) / gap if math.isfinite(gap) and gap > 0 and math.isfinite(run) else math.nan
 
 
-def fmt(v: float, digits: int = 2, sign: bool = False) -> str:
-    if not math.isfinite(v):
-        return "–"
-    return f"{v:+.{digits}f}" if sign else f"{v:.{digits}f}"
-
-
 def report(docs: dict[tuple[str, str], dict]) -> tuple[str, dict]:
     """The section's text and data."""
     body = [
@@ -100,10 +94,10 @@ def report(docs: dict[tuple[str, str], dict]) -> tuple[str, dict]:
                 rec |= {"gaussians": doc.get("n_gaussians"), "cpu_s": float(cpu) if cpu is not None else math.nan,
                         "margin": margin_closed(rec["psnr"], edi, oracle)}  # fmt: skip
                 data[f"{scene}/{run}"] = rec
-                rows.append([scene, f"`{run}`", *(fmt(rec[k], d) for k, d in METRICS), fmt(rec["brisque"], 1),
+                margin = fixed(100 * rec["margin"], 0) + (" %" if math.isfinite(rec["margin"]) else "")
+                rows.append([scene, f"`{run}`", *(fixed(rec[k], d) for k, d in METRICS), fixed(rec["brisque"], 1),
                              f"{rec['gaussians']:,}" if rec["gaussians"] is not None else "–",
-                             fmt(rec["cpu_s"], 0),
-                             fmt(100 * rec["margin"], 0) + (" %" if math.isfinite(rec["margin"]) else "")])  # fmt: skip
+                             fixed(rec["cpu_s"], 0), margin])  # fmt: skip
         body += ["", f"**{size}**", "",
                  table(["scene", "run", "PSNR", "SSIM", "LPIPS", "coherence", "BRISQUE", "Gaussians", "CPU s",
                         "margin"], rows)]  # fmt: skip
@@ -116,8 +110,8 @@ def report(docs: dict[tuple[str, str], dict]) -> tuple[str, dict]:
             diff = {k: sum(a[k] - b[k] for a, b in pairs) / len(pairs) for k, _ in METRICS}
             ratio = sum(a["cpu_s"] / b["cpu_s"] for a, b in pairs) / len(pairs)
             data[f"{size}/{run}-minus-eigs+"] = diff | {"train_ratio": ratio, "scenes": len(pairs)}
-            means.append([f"`{run}`", str(len(pairs)), *(fmt(diff[k], d, sign=True) for k, d in METRICS),
-                          fmt(ratio) + ("×" if math.isfinite(ratio) else "")])  # fmt: skip
+            means.append([f"`{run}`", str(len(pairs)), *(fixed(diff[k], d, sign=True) for k, d in METRICS),
+                          fixed(ratio) + ("×" if math.isfinite(ratio) else "")])  # fmt: skip
         if means:
             headers = ["run", "scenes", "PSNR", "SSIM", "LPIPS", "coherence", "CPU s ratio"]
             title = f"Against `eigs+` at {size}, the mean over the scenes that have both:"

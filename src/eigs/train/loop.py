@@ -79,14 +79,14 @@ def held_out_scores(render: Callable[[int], torch.Tensor], held: HeldOut | None)
     band is left out, as there). NaN for a score without images."""
     out: dict[str, list[float]] = {k: [] for k in HELD_OUT_COLUMNS}
     for i in range(len(held) if held is not None else 0):
-        img = torch.round(render(i).clamp(0, 1) * 255.0) / 255.0
+        img = (torch.round(render(i).clamp(0, 1) * 255.0) / 255.0).cpu()  # (H, W, C) on the 8-bit grid
         ref = held.images[i]  # type: ignore[union-attr]
-        p = float(psnr_torch(img.permute(2, 0, 1).cpu(), ref.permute(2, 0, 1)))
+        p = float(psnr_torch(img.permute(2, 0, 1), ref.permute(2, 0, 1)))
         novel = held.kind[i] == 1  # type: ignore[union-attr]
         out["psnr_novel" if novel else "psnr_blur"].append(p)
         if novel:
             try:
-                ratio, coherence = hf_scores(img.cpu().double().numpy(), ref.double().numpy())
+                ratio, coherence = hf_scores(img.double().numpy(), ref.double().numpy())
             except UndefinedSharpness:
                 continue
             out["sharpness_novel"].append(ratio)
