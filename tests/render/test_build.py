@@ -65,7 +65,7 @@ def test_isa_detection() -> None:
 
 def test_every_csrc_file_is_built_and_hashed() -> None:
     # A header missing from HEADERS would not enter the cache key: editing it would load a stale build.
-    on_disk = {p.name for p in _backend.CSRC.iterdir() if p.suffix in (".cpp", ".h")}
+    on_disk = {p.name for p in _backend.CSRC.iterdir() if p.suffix in (".cpp", ".h", ".inc")}
     assert on_disk == set(_backend.SOURCES + _backend.HEADERS)
 
 
@@ -99,3 +99,25 @@ def test_a_stale_build_lock_is_removed(tmp_path) -> None:
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "left by a process that died" in proc.stderr
     assert not (build / "lock").exists()
+
+
+def test_no_float32_kernel_expands_its_lane_vectors_piecewise(tmp_path) -> None:
+    """GCC expands a lane-vector comparison or select lane by lane when the function that holds it lacks the
+    kernel's target attribute, even once inlined into the AVX-512 kernel (pair_lanes.inc): that made the AVX-512
+    backward 4-6x slower than the AVX2 one without changing a bit of its output, so only the compiler can tell.
+    Compiles the compositing kernels with the extension's flags and ``-Wvector-operation-performance``: no such
+    warning may come from a float32 kernel (the float64 one, the gradcheck path, is exempt)."""
+    import shutil
+    import subprocess
+
+    cxx = shutil.which("g++") or shutil.which("c++")
+    if cxx is None:
+        pytest.skip("no C++ compiler")
+    for src in ("rasterize_bwd.cpp", "rasterize_fwd.cpp"):
+        out = subprocess.run([cxx, "-std=c++20", *_backend.CFLAGS, "-Wvector-operation-performance",
+                              f"-I{_backend.CSRC}", "-c", str(_backend.CSRC / src), "-o", str(tmp_path / "k.o")],
+                             capture_output=True, text=True)  # fmt: skip
+        assert out.returncode == 0, out.stderr[-2000:]
+        # each warning names the kernel it was inlined into: "inlined from 'void ...bwd_f32_c3_avx512(...)'"
+        piecewise = [line for line in out.stderr.splitlines() if "inlined from" in line and "_f32_" in line]
+        assert not piecewise, f"{src}:\n" + "\n".join(piecewise[:10])

@@ -24,7 +24,8 @@ from eigs.util.cache import cache_dir
 
 CSRC = Path(__file__).resolve().parent / "csrc"
 SOURCES = ("autograd.cpp", "ops.cpp", "projection.cpp", "rasterize_fwd.cpp", "rasterize_bwd.cpp")
-HEADERS = ("kernels.h", "ops.h", "pair_math.h", "raster_common.h", "tile_geom.h")
+HEADERS = ("kernels.h", "ops.h", "pair_math.h", "pair_lanes.inc", "raster_common.h", "rasterize_bwd_tile.inc",
+           "tile_geom.h")
 # Identical for every translation unit (forward and backward alike). Never -ffast-math:
 # -fno-trapping-math and -fno-math-errno only let GCC vectorise the branch-free loops without changing IEEE
 # results; -ffp-contract=off keeps the arithmetic identical across the baseline/AVX2/AVX-512 variants.

@@ -50,254 +50,42 @@ struct BwdScratch {
           last(kTilePix), gmax(kTilePix) {}
 };
 
-template <typename V, typename S>
-EIGS_INLINE V load_v(const S* p) {
-    V v;
-    __builtin_memcpy(&v, p, sizeof(V));
-    return v;
-}
-
-template <typename V, typename S>
-EIGS_INLINE void store_v(S* p, V v) {
-    __builtin_memcpy(p, &v, sizeof(V));
-}
-
-// Sum of the 16 lanes of a tile row held as NG groups of LW = 16 / NG lanes (group g = lanes g LW .. g LW + LW - 1),
-// of which only groups g0..g1 were computed (the others count as zero), in one fixed pairwise order over the 16
-// lanes: lane l + 8 onto lane l, then l + 4, l + 2, l + 1.  The first log2(NG) steps add whole groups, the rest
-// work inside the group, so every group width gives the same sum, bit for bit.
-template <typename S, typename V, int NG>
-EIGS_INLINE S sum_lanes(const V* per_group, int g0, int g1) {
-    constexpr int LW = int(sizeof(V) / sizeof(S));
-    V v[NG];
-    for (int g = 0; g < NG; ++g) v[g] = (g >= g0 && g <= g1) ? per_group[g] : V{};
-    for (int h = NG / 2; h >= 1; h /= 2)
-        for (int g = 0; g < h; ++g) v[g] = v[g] + v[g + h];
-    S t[LW];
-    __builtin_memcpy(t, &v[0], sizeof(V));
-    for (int w = LW / 2; w >= 1; w /= 2)
-        for (int l = 0; l < w; ++l) t[l] = t[l] + t[l + w];
-    return t[0];
-}
-
-// One tile, its Gaussians back to front.  Lane groups of LW pixels of a row are one vector (LW = the ISA's
-// width: 4 floats for SSE2, 8 for AVX2, 16 for AVX-512, 2 doubles); per Gaussian the kernel visits only the
-// groups and rows inside its conservative box (whose pixels outside have alpha < 1/255, the binning's guarantee,
-// as for the forward's rows) and skips a (row, group) once every pixel in it has its last contributor in front.
-//
-// Per pixel it carries T (see the scratch) and the scalar sv_k = sum_ch B_k,ch v_C,ch - v_A U_k, where B_k is the
-// colour behind Gaussian k including the background and U_k = prod_{j > k} (1 - alpha_j) the transmittance behind
-// it (so that d alpha_out / d alpha_k = T_k U_k): sv starts at <bg, v_C> - v_A and is updated as
-// sv <- alpha cg + (1 - alpha) sv with cg = sum_ch c_ch v_C,ch, and then
-//   dL/dalpha_k = T_k (cg - sv_k)   (colour through C and the background, and the alpha output),
-// one scalar per pixel instead of d colour channels.  The per-pair gradients through sigma are accumulated as
-// moments of v_sigma (sigma_moments_vjp): per lane the sums over rows of v_sigma, dy v_sigma and dy^2 v_sigma,
-// multiplied by the lane's dx (constant along a column) once per Gaussian.
-template <typename S, int DC, int LW>
-EIGS_INLINE void bwd_tile(const BwdCtx<S>& A, int64_t tile, BwdScratch<S>& ws) {
-    using V = typename LaneVec<S, LW>::type;
-    using M = decltype(V{} < V{});  // lane mask: integers of the width of S
-    using I32 = typename LaneVec<int32_t, LW>::type;
-    constexpr int NG = kTile / LW;  // lane groups per tile row
-    static_assert(NG * LW == kTile, "LW must divide the tile width");
-    const int64_t D = DC > 0 ? DC : A.d;
-    const int64_t P = 6 + D;
-    const TileGeom tg = tile_geom(tile, A.width, A.height);
-    const int64_t start = A.tile_offsets[tile], count = A.tile_offsets[tile + 1] - start;
-    S* __restrict__ T = ws.T.data();
-    S* __restrict__ SV = ws.sv.data();
-    S* __restrict__ G = ws.G.data();
-    S* __restrict__ vcol = ws.vcol.data();
-    S* __restrict__ vcol16 = ws.vcol16.data();
-    int32_t* __restrict__ last = ws.last.data();
-    int32_t* __restrict__ gmax = ws.gmax.data();
-
-    int32_t row_max_last[kTile];
-    int32_t tile_max_last = -1;
-    S* __restrict__ bg_sum = A.tile_bg + tile * D;
-    std::fill(bg_sum, bg_sum + D, S(0));
-    for (int r = 0; r < kTile; ++r) {
-        row_max_last[r] = -1;
-        for (int l = 0; l < kTile; ++l) {
-            const int q = r * kTile + l;
-            if (r < tg.rows && l < tg.cols) {
-                const int64_t pix = (tg.y0 + r) * A.width + (tg.x0 + l);
-                const S tf = A.trans[pix];
-                S bgdot = S(0);
-                for (int64_t ch = 0; ch < D; ++ch) {
-                    const S gv = A.v_image[pix * D + ch];
-                    G[ch * kTilePix + q] = gv;
-                    bgdot += A.background[ch] * gv;
-                    bg_sum[ch] += tf * gv;
-                }
-                T[q] = tf;
-                SV[q] = bgdot - A.v_alpha[pix];
-                last[q] = A.last[pix];
-            } else {
-                for (int64_t ch = 0; ch < D; ++ch) G[ch * kTilePix + q] = S(0);
-                T[q] = S(1);
-                SV[q] = S(0);
-                last[q] = -1;
-            }
-        }
-        for (int grp = 0; grp < NG; ++grp) {
-            int32_t m = -1;
-            for (int l = grp * LW; l < (grp + 1) * LW; ++l) m = std::max(m, last[r * kTile + l]);
-            gmax[r * NG + grp] = m;
-            row_max_last[r] = std::max(row_max_last[r], m);
-        }
-        tile_max_last = std::max(tile_max_last, row_max_last[r]);
-    }
-    V pxv[NG];
-    for (int grp = 0; grp < NG; ++grp)
-        for (int l = 0; l < LW; ++l) pxv[grp][l] = S(tg.x0 + grp * LW + l) + S(0.5);
-    const int32_t tx = int32_t(tg.x0 / kTile), ty = int32_t(tg.y0 / kTile);
-
-    for (int64_t k = count - 1; k >= 0; --k) {
-        // prefetch (raster_common.h): the parameters kPrefetch Gaussians ahead, the next Gaussian's pair slot (which
-        // needs its rectangle) for writing
-        if (k >= kPrefetch) {
-            const int64_t h = A.flatten_ids[start + k - kPrefetch];
-            __builtin_prefetch(A.means2d + 2 * h);
-            __builtin_prefetch(A.conics + 3 * h);
-            __builtin_prefetch(A.opacities + h);
-            __builtin_prefetch(A.extents + 2 * h);
-            __builtin_prefetch(A.colors + h * D);
-            __builtin_prefetch(A.rect + 4 * h);
-            __builtin_prefetch(A.slot0 + h);
-        }
-        if (k >= 1) {
-            const int64_t h = A.flatten_ids[start + k - 1];
-            const int32_t* rh = A.rect + 4 * h;
-            const int64_t sl = A.slot0[h] + int64_t(ty - rh[2]) * (rh[1] - rh[0] + 1) + (tx - rh[0]);
-            if (sl >= 0 && sl < A.n_isects) __builtin_prefetch(A.pair_grads + sl * P, 1);
-        }
-        const int64_t g = A.flatten_ids[start + k];
-        const int32_t* rc = A.rect + 4 * g;
-        if (tx < rc[0] || tx > rc[1] || ty < rc[2] || ty > rc[3]) {  // binning inconsistent with the rects
-            A.mismatch->store(true, std::memory_order_relaxed);
-            continue;
-        }
-        const int64_t slot = A.slot0[g] + int64_t(ty - rc[2]) * (rc[1] - rc[0] + 1) + (tx - rc[0]);
-        S* __restrict__ out = A.pair_grads + slot * P;
-        std::fill(out, out + P, S(0));
-        if (k > tile_max_last) continue;
-        const S mx = A.means2d[2 * g], my = A.means2d[2 * g + 1];
-        const S ca = A.conics[3 * g], cb = A.conics[3 * g + 1], cc = A.conics[3 * g + 2];
-        const S op = A.opacities[g];
-        const S* __restrict__ col = A.colors + g * D;
-        int r0, r1, c0, c1;
-        box_rows(double(my), double(A.extents[2 * g + 1]), tg.y0, tg.rows, r0, r1);
-        box_rows(double(mx), double(A.extents[2 * g]), tg.x0, tg.cols, c0, c1);  // the same range, on columns
-        if (r0 > r1 || c0 > c1) continue;
-        const int32_t kk = int32_t(k);
-        const M kkv = M{} + kk;
-        const V opv = V{} + op;
-        V colv[DC > 0 ? DC : 1];
-        if constexpr (DC > 0)
-            for (int ch = 0; ch < DC; ++ch) colv[ch] = V{} + col[ch];
-        // Per lane group, per lane: the sums over the Gaussian's rows of dx^2 v_sigma, dx v_sigma, dx dy v_sigma,
-        // dy v_sigma, dy^2 v_sigma, v_opacity and (DC > 0) v_color, kept per group so that the lanes are summed
-        // in one fixed order over the 16 lanes of the tile row (lane_sum), whatever the ISA's group width: the
-        // gradients are bit-identical across the baseline, AVX2 and AVX-512 variants.
-        const int gl0 = c0 / LW, gl1 = c1 / LW;
-        V gq[6 + (DC > 0 ? DC : 0)][NG];
-        for (int grp = gl0; grp <= gl1; ++grp) {
-            const V dx = pxv[grp] - mx;
-            const V cadxdx = ca * dx * dx;
-            const V cbdx = cb * dx;
-            V s0{}, s1{}, s2{}, so{};  // sums over rows of v_sigma, dy v_sigma, dy^2 v_sigma, v_opacity
-            V sc[DC > 0 ? DC : 1];     // and of v_color
-            if constexpr (DC > 0)
-                for (int ch = 0; ch < DC; ++ch) sc[ch] = V{};
-            else
-                std::fill(vcol, vcol + D * LW, S(0));
-            for (int r = r0; r <= r1; ++r) {
-                if (kk > gmax[r * NG + grp]) continue;
-                const S dy = (S(tg.y0 + r) + S(0.5)) - my;
-                const int q = r * kTile + grp * LW;
-                const V sigma = pair_sigma_parts(cadxdx, cc * dy * dy, cbdx, dy);
-                const V f = pair_falloff(sigma);
-                const V raw = pair_raw_alpha(opv, f);
-                const V a = pair_alpha(raw);
-                const M lastv = __builtin_convertvector(load_v<I32>(last + q), M);
-                const M valid = pair_valid(sigma, raw) & (kkv <= lastv);
-                const V Tv = load_v<V>(T + q);
-                const V Tk = valid ? Tv * pair_inv_one_minus(a) : Tv;  // transmittance in front of k
-                const V sv = load_v<V>(SV + q);
-                V cg;
-                if constexpr (DC > 0) {
-                    cg = colv[0] * load_v<V>(G + q);
-                    for (int ch = 1; ch < DC; ++ch) cg = cg + colv[ch] * load_v<V>(G + ch * kTilePix + q);
-                } else {
-                    cg = col[0] * load_v<V>(G + q);
-                    for (int64_t ch = 1; ch < D; ++ch) cg = cg + col[ch] * load_v<V>(G + ch * kTilePix + q);
-                }
-                const V v_alpha = Tk * (cg - sv);
-                store_v(SV + q, valid ? a * cg + (cst<V>(1) - a) * sv : sv);
-                store_v(T + q, Tk);
-                // v_color += w v_C with w = alpha T the pair's weight in C; selected after the product (as every
-                // masked term here), so that a non-finite v_C reaches only the Gaussians composited at its pixel
-                const V w = a * Tk;
-                if constexpr (DC > 0) {
-                    for (int ch = 0; ch < DC; ++ch) sc[ch] += valid ? w * load_v<V>(G + ch * kTilePix + q) : V{};
-                } else {
-                    for (int64_t ch = 0; ch < D; ++ch)
-                        store_v(vcol + ch * LW, load_v<V>(vcol + ch * LW) +
-                                                    (valid ? w * load_v<V>(G + ch * kTilePix + q) : V{}));
-                }
-                V v_sigma, v_o;
-                pair_alpha_vjp(raw, f, v_alpha, valid & pair_unclamped(raw), v_sigma, v_o);
-                s0 += v_sigma;
-                s1 += dy * v_sigma;
-                s2 += (dy * dy) * v_sigma;
-                so += v_o;
-            }
-            gq[0][grp] = (dx * dx) * s0;
-            gq[1][grp] = dx * s0;
-            gq[2][grp] = dx * s1;
-            gq[3][grp] = s1;
-            gq[4][grp] = s2;
-            gq[5][grp] = so;
-            if constexpr (DC > 0) {
-                for (int ch = 0; ch < DC; ++ch) gq[6 + ch][grp] = sc[ch];
-            } else {
-                for (int64_t ch = 0; ch < D; ++ch)
-                    for (int l = 0; l < LW; ++l) vcol16[ch * kTile + grp * LW + l] = vcol[ch * LW + l];
-            }
-        }
-        auto lane_sum = [&](const V* per_group) { return sum_lanes<S, V, NG>(per_group, gl0, gl1); };
-        sigma_moments_vjp(ca, cb, cc, lane_sum(gq[0]), lane_sum(gq[2]), lane_sum(gq[4]), lane_sum(gq[1]),
-                          lane_sum(gq[3]), out);
-        out[5] = lane_sum(gq[5]);
-        if constexpr (DC > 0) {
-            for (int ch = 0; ch < DC; ++ch) out[6 + ch] = lane_sum(gq[6 + ch]);
-        } else {
-            for (int64_t ch = 0; ch < D; ++ch) {
-                V pg[NG];
-                for (int grp = gl0; grp <= gl1; ++grp) pg[grp] = load_v<V>(vcol16 + ch * kTile + grp * LW);
-                out[6 + ch] = lane_sum(pg);
-            }
-        }
-    }
-}
+// The tile kernel and the lane math it inlines, once per ISA (rasterize_bwd_tile.inc, pair_lanes.inc).
+namespace isa_base {
+#define EIGS_LANE_TARGET EIGS_TARGET_BASE
+#include "pair_lanes.inc"
+#include "rasterize_bwd_tile.inc"
+#undef EIGS_LANE_TARGET
+}  // namespace isa_base
+namespace isa_avx2 {
+#define EIGS_LANE_TARGET EIGS_TARGET_AVX2
+#include "pair_lanes.inc"
+#include "rasterize_bwd_tile.inc"
+#undef EIGS_LANE_TARGET
+}  // namespace isa_avx2
+namespace isa_avx512 {
+#define EIGS_LANE_TARGET EIGS_TARGET_AVX512
+#include "pair_lanes.inc"
+#include "rasterize_bwd_tile.inc"
+#undef EIGS_LANE_TARGET
+}  // namespace isa_avx512
 
 template <typename S>
 using BwdFn = void (*)(const BwdCtx<S>&, int64_t, BwdScratch<S>&);
 
-#define EIGS_BWD_VARIANT(NAME, TARGET, S, DC, LW) \
-    TARGET void NAME(const BwdCtx<S>& a, int64_t t, BwdScratch<S>& ws) { bwd_tile<S, DC, LW>(a, t, ws); }
+#define EIGS_BWD_VARIANT(NAME, TARGET, NS, S, DC, LW) \
+    TARGET void NAME(const BwdCtx<S>& a, int64_t t, BwdScratch<S>& ws) { NS::bwd_tile<S, DC, LW>(a, t, ws); }
 
-EIGS_BWD_VARIANT(bwd_f32_c1_base, EIGS_TARGET_BASE, float, 1, 4)
-EIGS_BWD_VARIANT(bwd_f32_c3_base, EIGS_TARGET_BASE, float, 3, 4)
-EIGS_BWD_VARIANT(bwd_f32_cd_base, EIGS_TARGET_BASE, float, 0, 4)
-EIGS_BWD_VARIANT(bwd_f32_c1_avx2, EIGS_TARGET_AVX2, float, 1, 8)
-EIGS_BWD_VARIANT(bwd_f32_c3_avx2, EIGS_TARGET_AVX2, float, 3, 8)
-EIGS_BWD_VARIANT(bwd_f32_cd_avx2, EIGS_TARGET_AVX2, float, 0, 8)
-EIGS_BWD_VARIANT(bwd_f32_c1_avx512, EIGS_TARGET_AVX512, float, 1, 16)
-EIGS_BWD_VARIANT(bwd_f32_c3_avx512, EIGS_TARGET_AVX512, float, 3, 16)
-EIGS_BWD_VARIANT(bwd_f32_cd_avx512, EIGS_TARGET_AVX512, float, 0, 16)
-EIGS_BWD_VARIANT(bwd_f64_cd_base, EIGS_TARGET_BASE, double, 0, 2)
+EIGS_BWD_VARIANT(bwd_f32_c1_base, EIGS_TARGET_BASE, isa_base, float, 1, 4)
+EIGS_BWD_VARIANT(bwd_f32_c3_base, EIGS_TARGET_BASE, isa_base, float, 3, 4)
+EIGS_BWD_VARIANT(bwd_f32_cd_base, EIGS_TARGET_BASE, isa_base, float, 0, 4)
+EIGS_BWD_VARIANT(bwd_f32_c1_avx2, EIGS_TARGET_AVX2, isa_avx2, float, 1, 8)
+EIGS_BWD_VARIANT(bwd_f32_c3_avx2, EIGS_TARGET_AVX2, isa_avx2, float, 3, 8)
+EIGS_BWD_VARIANT(bwd_f32_cd_avx2, EIGS_TARGET_AVX2, isa_avx2, float, 0, 8)
+EIGS_BWD_VARIANT(bwd_f32_c1_avx512, EIGS_TARGET_AVX512, isa_avx512, float, 1, 16)
+EIGS_BWD_VARIANT(bwd_f32_c3_avx512, EIGS_TARGET_AVX512, isa_avx512, float, 3, 16)
+EIGS_BWD_VARIANT(bwd_f32_cd_avx512, EIGS_TARGET_AVX512, isa_avx512, float, 0, 16)
+EIGS_BWD_VARIANT(bwd_f64_cd_base, EIGS_TARGET_BASE, isa_base, double, 0, 2)
 
 BwdFn<float> pick_bwd(const float*, int64_t d, int isa) {
     const int c = d == 1 ? 0 : d == 3 ? 1 : 2;
