@@ -235,7 +235,9 @@ class MultiRender(Method):
         stack = torch.stack(images)  # (R, H, W, C) in time order
         w = self.blur_weights(len(images)).to(stack).reshape(-1, 1, 1, 1)
         blur = from_linear((to_linear(stack, self.response) * w).sum(dim=0), self.response)
-        stack = stack[latent_pos]  # the N+1 latent renders for the event losses
+        if latent_pos != list(range(len(images))):  # the N+1 latent renders for the event losses, in time order
+            # (a stack, not stack[latent_pos]: the backward of an index is a scatter-add, ~7 ms at 346×260)
+            stack = torch.stack([images[i] for i in latent_pos])
         loss, l1, dssim = photometric_loss(blur, self.blurry[v], self.cfg.lambda_dssim, self.cfg.ssim_range)
         terms = {"l1": l1.item(), "dssim": dssim.item()}
         if o.event_loss == "eigs":
@@ -255,9 +257,12 @@ class MultiRender(Method):
             terms["event"] = ev.item()
         # a latent frame without a pose has no render of its own time (self.valid is on the CPU: no device sync)
         if self.latent is not None and bool(self.valid[v].any()):
-            ok = self.valid[v].to(stack.device)
             lam = self.cfg.lambda_dssim if o.latent_dssim else 0.0
-            lat, _, _ = photometric_loss(stack[ok], self.latent[v][ok], lam, self.cfg.ssim_range)
+            if bool(self.valid[v].all()):  # every latent frame posed: no index (its backward is a scatter-add)
+                lat, _, _ = photometric_loss(stack, self.latent[v], lam, self.cfg.ssim_range)
+            else:
+                ok = self.valid[v].to(stack.device)
+                lat, _, _ = photometric_loss(stack[ok], self.latent[v][ok], lam, self.cfg.ssim_range)
             loss = loss + o.latent_weight * lat
             terms["latent"] = lat.item()
         if o.consistency and dx is not None:
