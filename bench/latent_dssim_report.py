@@ -48,7 +48,9 @@ def read(results: list[Path]) -> dict[tuple[str, str], dict]:
                 doc = json.loads(path.read_text())
                 run_config = path.parents[2] / run / "config.json"  # <root>/<scene>/b4/<run>/config.json
                 if run_config.is_file():
-                    doc["process_cpu_s"] = (json.loads(run_config.read_text()).get("run") or {}).get("process_cpu_s")
+                    facts = json.loads(run_config.read_text()).get("run") or {}
+                    doc["process_cpu_s"] = facts.get("process_cpu_s")
+                    doc["resumed_at_step"] = facts.get("resumed_at_step") or 0
                 out[(scene, run)] = doc
     return out
 
@@ -78,6 +80,7 @@ def report(docs: dict[tuple[str, str], dict]) -> tuple[str, dict]:
         + "; ".join(f"`{r}` {what}" for r, what in RUNS.items() if what != "reference") + ".",
     ]
     data: dict[str, dict] = {}
+    resumed: list[str] = []  # runs whose CPU seconds cover only the process that finished them
     for size, is_size in (("128×96", lambda s: not s.startswith("d346")), ("346×260", lambda s: s.startswith("d346"))):
         scenes = sorted({s for s, r in docs if is_size(s) and r in CANDIDATES})
         if not scenes:
@@ -91,6 +94,9 @@ def report(docs: dict[tuple[str, str], dict]) -> tuple[str, dict]:
                     continue
                 rec = {key: value(doc, key) for key, _ in METRICS} | {"brisque": value(doc, "brisque")}
                 cpu = doc.get("process_cpu_s")
+                if doc.get("resumed_at_step"):  # its last process's CPU only: not a training's cost
+                    cpu = None
+                    resumed.append(f"{scene} `{run}` resumed at step {doc['resumed_at_step']}")
                 rec |= {"gaussians": doc.get("n_gaussians"), "cpu_s": float(cpu) if cpu is not None else math.nan,
                         "margin": margin_closed(rec["psnr"], edi, oracle)}  # fmt: skip
                 data[f"{scene}/{run}"] = rec
@@ -116,6 +122,9 @@ def report(docs: dict[tuple[str, str], dict]) -> tuple[str, dict]:
             headers = ["run", "scenes", "PSNR", "SSIM", "LPIPS", "coherence", "CPU s ratio"]
             title = f"Against `eigs+` at {size}, the mean over the scenes that have both:"
             body += ["", title, "", table(headers, means)]
+    if resumed:
+        body += ["", "CPU s left out (–) of runs resumed from a checkpoint, whose recorded CPU seconds are the last "
+                 "process's only: " + "; ".join(resumed) + "."]  # fmt: skip
     return "\n".join(body), data
 
 

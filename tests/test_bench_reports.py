@@ -88,3 +88,13 @@ def test_the_latent_report_closes_margins_and_averages_against_eigs_plus(tmp_pat
     mean = data["128×96/eigs+-ld-minus-eigs+"]
     assert mean["scenes"] == 2 and abs(mean["psnr"] - 0.1) < 1e-12 and math.isnan(mean["train_ratio"])
     assert "| d346-x | `eigs+-ds` | 31.50 |" in text and "75 %" in text
+    assert "resumed" not in text
+
+
+def test_the_latent_report_leaves_out_the_cpu_of_a_resumed_run(tmp_path):
+    _metrics(tmp_path, "d346-x", "eigs+-l2d", 31.0, 0.2, 50.0)
+    cfg = tmp_path / "d346-x" / "b4" / "eigs+-l2d" / "config.json"
+    cfg.write_text(json.dumps({"run": {"process_cpu_s": 50.0, "resumed_at_step": 1500}}))
+    text, data = latent_dssim_report.report(latent_dssim_report.read([tmp_path]))
+    assert math.isnan(data["d346-x/eigs+-l2d"]["cpu_s"])
+    assert "d346-x `eigs+-l2d` resumed at step 1500" in text

@@ -70,6 +70,9 @@ def test_killed_run_resumes_to_the_same_parameters(data, tmp_path):
     a = list(csv.DictReader((tmp_path / "full" / "train_log.csv").open()))
     b = list(csv.DictReader((tmp_path / "resumed" / "train_log.csv").open()))
     assert [r["loss"] for r in a] == [r["loss"] for r in b]
+    # the run says where its last process began (its process_cpu_s covers only the steps from there)
+    facts = [json.loads((tmp_path / r / "config.json").read_text())["run"] for r in ("full", "resumed")]
+    assert [f["resumed_at_step"] for f in facts] == [0, 130]
 
 
 def test_run_stopped_part_way_through_a_longer_schedule(data, tmp_path):

@@ -111,6 +111,7 @@ class RunTrainer(ABC):
         self.wall = 0.0  # training seconds (wall clock)
         self.bad = 0  # non-finite steps in a row
         self.skipped = 0
+        self.resumed_at = 0  # the step this process resumed at (0: it trained from the start)
         self._last: dict[str, float] = {}  # the last good step's loss and terms
 
     # ------------------------------------------------------------------ hooks
@@ -252,6 +253,7 @@ class RunTrainer(ABC):
         if problem is not None:
             log.warning("ignoring damaged checkpoint %s (%s)", path, problem)
             return False
+        self.resumed_at = self.step
         log.info("resumed from %s at step %d", path, self.step)
         return True
 
@@ -341,6 +343,7 @@ def write_run(tr: RunTrainer, run_dir: Path, inputs: dict[str, str]) -> None:
         # its last process only): what the job costs alone on a shared machine (Snakemake's benchmark files
         # sample CPU time every ~30 s and miss up to that much of a job's end)
         "process_cpu_s": round(time.process_time(), 3),
+        "resumed_at_step": tr.resumed_at,  # > 0: process_cpu_s covers only the steps from here
         "skipped_steps": tr.skipped,
         **tail,
         "final": tr.rows[-1] if tr.rows else {},
