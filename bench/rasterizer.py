@@ -180,8 +180,11 @@ def load_revision(rev: str):
 
     root = Path(__file__).resolve().parents[1]
     rel = _backend.CSRC.relative_to(root)
+    # every file of the revision's csrc folder (its file list may differ from this tree's), all its .cpp compiled
+    listing = subprocess.run(["git", "-C", str(root), "ls-tree", "--name-only", f"{rev}:{rel.as_posix()}"],
+                             check=True, capture_output=True, text=True).stdout.split()  # fmt: skip
     files = {}
-    for name in _backend.SOURCES + _backend.HEADERS:
+    for name in listing:
         files[name] = subprocess.run(["git", "-C", str(root), "show", f"{rev}:{rel.as_posix()}/{name}"],
                                      check=True, capture_output=True).stdout  # fmt: skip
     h = hashlib.sha256(b"".join(files.values()) + " ".join(_backend.CFLAGS + _backend.LDFLAGS).encode())
@@ -192,7 +195,7 @@ def load_revision(rev: str):
     for fname, data in files.items():
         (csrc / fname).write_bytes(data)
     _backend.ninja_on_path()
-    return cpp_extension.load(name=name, sources=[str(csrc / f) for f in _backend.SOURCES],
+    return cpp_extension.load(name=name, sources=[str(csrc / f) for f in sorted(files) if f.endswith(".cpp")],
                               extra_cflags=list(_backend.CFLAGS), extra_ldflags=list(_backend.LDFLAGS),
                               extra_include_paths=[str(csrc)], build_directory=str(build), verbose=False)  # fmt: skip
 
