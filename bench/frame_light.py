@@ -1,10 +1,11 @@
 """How much of each scene's texture the blur term's SSIM can see (issue 43, part 4; docs/results.md "Why `eigs+`
 renders smooth at 346×260").
 
-Per scene, over its blurry training frames (luma, 8-bit DN): the mean, and the median over pixels of the local
-variance in SSIM's window (11 × 11 Gaussian, σ = 1.5 px: E_w[x²] − E_w[x]², "valid" positions only), against SSIM's
-constant C2 = (0.03 · 255)² = 58.5 DN² at data range 1. Where the local variance is far below C2, SSIM's contrast
-term is flat in the texture and the blur term's D-SSIM barely asks for it.
+Per scene, over its blurry training frames (BT.709 luma, 8-bit DN): the mean, and the median over pixels of the
+local variance in SSIM's window against SSIM's constant C2 = (0.03 · 255)² = 58.5 DN² at data range 1
+(:mod:`eigs.metrics.texture`). Where the local variance is far below C2, SSIM's contrast term is flat in the texture
+and the blur term's D-SSIM barely asks for it; below ``DARK_TEXTURE`` × C2 the option ``latent_weight_dark`` of
+EiGS takes over the sharp-frame term's weight.
 
 Run: ``.venv/bin/python bench/frame_light.py results/chair results/d346-chair … [--out DIR]`` (each argument a
 scene's results folder holding ``scene.h5``); the section is ``frame-light`` in docs/benchmarks.md.
@@ -16,49 +17,23 @@ import argparse
 import sys
 from pathlib import Path
 
-import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench._report import add_out_argument, fixed, table, write_section  # noqa: E402
-from eigs.metrics.pixel import gaussian_window  # noqa: E402
+from eigs.metrics.texture import DARK_TEXTURE, SSIM_C2, local_variance, luma  # noqa: E402
 from eigs.scene.file import read_scene  # noqa: E402
 
-C2_DN2 = (0.03 * 255.0) ** 2  # SSIM's C2 at data range 1, in DN² (58.5)
-LUMA = (0.299, 0.587, 0.114)  # Rec. 601 weights of R, G, B
-
-
-def luma_dn(frames: np.ndarray) -> np.ndarray:
-    """(N, H, W, C) uint8 or float in DN → (N, H, W) float64 luma in DN (a single channel passes through)."""
-    x = np.asarray(frames, dtype=np.float64)
-    if x.ndim == 3:
-        return x
-    if x.shape[-1] == 1:
-        return x[..., 0]
-    return x[..., :3] @ np.asarray(LUMA)
-
-
-def local_variance(images: np.ndarray) -> np.ndarray:
-    """(N, H, W) float64 → (N, H − 10, W − 10) local variance in SSIM's window, float64 (≥ 0: rounding below 0 is
-    clipped; exact to ~1e-12 relative to the squared values)."""
-    if images.ndim != 3 or images.shape[1] < 11 or images.shape[2] < 11:
-        raise ValueError(f"images must be (N, H ≥ 11, W ≥ 11), got {images.shape}")
-    g = gaussian_window(11, 1.5, dtype=torch.float64)
-    w = torch.outer(g, g)[None, None]  # (1, 1, 11, 11), sums to 1
-    x = torch.from_numpy(np.ascontiguousarray(images))[:, None]
-    mean = torch.nn.functional.conv2d(x, w)
-    mean_sq = torch.nn.functional.conv2d(x * x, w)
-    return (mean_sq - mean * mean).clamp_min(0.0)[:, 0].numpy()
-
+C2_DN2 = SSIM_C2 * 255.0**2  # 58.5 DN²
 
 def scene_light(scene_h5: Path) -> dict[str, float]:
     """A scene's blurry frames: mean DN, median local variance (DN²) and its ratio to C2."""
     scene = read_scene(scene_h5, events=False)
     scene.require("frames", path=str(scene_h5), hint="the blurry frames are measured")
-    y = luma_dn(scene.frames.blurry)  # type: ignore[union-attr]
-    var = float(np.median(local_variance(y)))
+    y = luma(torch.from_numpy(scene.frames.blurry) / 255.0) * 255.0  # type: ignore[union-attr]  # (N, H, W) DN
+    var = float(local_variance(y).median())
     return {"width": y.shape[2], "height": y.shape[1], "frames": y.shape[0], "mean_dn": float(y.mean()),
-            "median_local_var_dn2": var, "var_over_c2": var / C2_DN2}  # fmt: skip
+            "median_local_var_dn2": var, "var_over_c2": var / C2_DN2, "dark": var / C2_DN2 < DARK_TEXTURE}  # fmt: skip
 
 
 def main() -> None:
@@ -71,13 +46,15 @@ def main() -> None:
         m = scene_light(r / "scene.h5")
         data[r.name] = m
         rows.append([r.name, f"{m['width']}×{m['height']}", str(m["frames"]), fixed(m["mean_dn"], 1),
-                     fixed(m["median_local_var_dn2"], 1), fixed(m["var_over_c2"], 3)])  # fmt: skip
+                     fixed(m["median_local_var_dn2"], 1), fixed(m["var_over_c2"], 3),
+                     "yes" if m["dark"] else "no"])  # fmt: skip
         print(rows[-1], flush=True)
     body = (
-        "Blurry training frames, luma in DN: the mean, and the median over pixels of the local variance in SSIM's "
-        f"11-pixel Gaussian window (σ = 1.5), against SSIM's C2 = {C2_DN2:.1f} DN² at data range 1 "
-        "(`bench/frame_light.py`).\n\n"
-        + table(["scene", "size", "frames", "mean DN", "median local variance (DN²)", "÷ C2"], rows)
+        "Blurry training frames, BT.709 luma in DN: the mean, and the median over pixels of the local variance in "
+        f"SSIM's 11-pixel Gaussian window (σ = 1.5), against SSIM's C2 = {C2_DN2:.1f} DN² at data range 1 "
+        f"(`bench/frame_light.py`, eigs.metrics.texture); 'dark': below {DARK_TEXTURE} × C2, where the option "
+        "`latent_weight_dark` of EiGS applies.\n\n"
+        + table(["scene", "size", "frames", "mean DN", "median local variance (DN²)", "÷ C2", "dark"], rows)
         + "\n"
     )
     write_section("frame-light", "How much texture the blur term's SSIM sees (issue 43)", body, data=data,

@@ -11,7 +11,6 @@ import sys
 from pathlib import Path
 
 import numpy as np
-import pytest
 from PIL import Image
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -100,29 +99,3 @@ def test_the_latent_report_leaves_out_the_cpu_of_a_resumed_run(tmp_path):
     assert math.isnan(data["d346-x/eigs+-l2d"]["cpu_s"])
     assert "d346-x `eigs+-l2d` resumed at step 1500" in text
 
-
-def test_local_variance_of_ssim_window_has_its_closed_forms():
-    from bench import frame_light
-
-    rng = np.random.default_rng(0)
-    flat = np.full((2, 40, 50), 17.0)
-    assert frame_light.local_variance(flat).shape == (2, 30, 40)
-    assert frame_light.local_variance(flat).max() < 1e-9  # no texture, no variance
-    # i.i.d. noise of variance s²: E[Σ w x² − (Σ w x)²] = s² (1 − Σ w²), Σ w² of the 11-px σ 1.5 window
-    noise = rng.normal(100.0, 5.0, (4, 200, 200))
-    w = np.exp(-((np.arange(11) - 5) ** 2) / (2 * 1.5**2))
-    w2 = (np.outer(w, w) / np.outer(w, w).sum()) ** 2
-    expected = 25.0 * (1.0 - w2.sum())
-    assert abs(frame_light.local_variance(noise).mean() / expected - 1) < 0.01
-    # a step edge of height 10: a window with weight P beyond it has variance 100 P (1 − P), P the window's column
-    # weights past the edge (the 1-D Gaussian's tail sums); the largest over the positions
-    edge = np.zeros((1, 21, 22))
-    edge[:, :, 11:] = 10.0
-    g = w / w.sum()
-    tails = np.array([g[k:].sum() for k in range(12)])
-    assert abs(frame_light.local_variance(edge).max() - (100 * tails * (1 - tails)).max()) < 1e-9
-    rgb = np.zeros((1, 12, 12, 3))
-    rgb[..., 1] = 100.0
-    assert np.allclose(frame_light.luma_dn(rgb), 58.7)
-    with pytest.raises(ValueError, match="11"):
-        frame_light.local_variance(np.zeros((1, 5, 40)))

@@ -1,7 +1,8 @@
 """The method catalog (eigs.train.catalog) and the one options validator (eigs.train.resolve) (no torch and no import
 circle: tests/test_imports.py): a new method is one entry plus one class, and every config's runs resolve to the options
 they had before the catalog (tests/train/data/resolved_runs.json, written by the code of 5f548ef; keys added since
-enter it with their defaults: ``grow_grad2d_renders``, ``discrete_floor``, ``latent_dssim``, ``ssim_range``)."""
+enter it with their defaults: ``grow_grad2d_renders``, ``discrete_floor``, ``latent_dssim``, ``ssim_range``,
+``latent_weight_dark``)."""
 
 from __future__ import annotations
 

@@ -284,6 +284,31 @@ def test_latent_dssim_adds_the_photometric_loss_of_each_latent_render(data):
                                atol=1e-6, rtol=1e-5)  # the other terms unchanged
 
 
+def test_latent_weight_dark_takes_over_only_where_ssim_cannot_see_the_texture(data):
+    """``latent_weight_dark`` replaces ``latent_weight`` on a scene whose blurry frames' texture is below
+    DARK_TEXTURE × C2 (eigs.metrics.texture), and the run is then the run configured with that weight: the same
+    step, bit for bit. The toy's frames are bright; darkened by k, their local variance drops by k²."""
+    import dataclasses
+
+    from eigs.metrics.texture import DARK_TEXTURE, ssim_texture_visibility
+
+    bright = ssim_texture_visibility(data.blurry)
+    assert bright > DARK_TEXTURE
+    k = (0.5 * DARK_TEXTURE / bright) ** 0.5
+    dark = dataclasses.replace(data, blurry=data.blurry * k)
+    assert ssim_texture_visibility(dark.blurry) == pytest.approx(0.5 * DARK_TEXTURE, rel=1e-5)
+    for scene, expect in ((data, 0.5), (dark, 2.0)):
+        auto = _method(scene, "eigs-minus", latent_weight=0.5, latent_weight_dark=2.0, latent_dssim=True)
+        fixed = _method(scene, "eigs-minus", latent_weight=expect, latent_dssim=True)
+        assert auto.method.latent_weight == expect
+        a, b = auto.method.step(auto.model, 0, 0, 0), fixed.method.step(fixed.model, 0, 0, 0)
+        assert torch.equal(a.loss, b.loss) and a.terms == b.terms
+    off = _method(dark, "eigs-minus", latent_weight=0.5)  # latent_weight_dark 0 (the default): no switch
+    assert off.method.latent_weight == 0.5
+    with pytest.raises(EigsError, match="latent_weight_dark"):
+        _method(data, "eigs", latent_weight_dark=-1.0)
+
+
 @pytest.mark.parametrize(
     ("name", "options"),
     [("e2gs", {}), ("eigs", {"pose_prior": True, "ade_zero_last": True}),

@@ -9,6 +9,8 @@ intensity (Eq. 2/7) and compare with the blurry frame (Eq. 8); add the event los
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 import torch
 from torch import Tensor
@@ -25,6 +27,7 @@ from eigs.losses.events import (
     luma,
     to_linear,
 )
+from eigs.metrics.texture import DARK_TEXTURE, ssim_texture_visibility
 from eigs.render.rigid import transform_gaussians
 from eigs.train.config import TrainConfig
 from eigs.train.data import TrainData
@@ -34,6 +37,8 @@ from eigs.train.gaussian.methods import LatentMotion, Method, StepOutput
 from eigs.train.gaussian.model import GaussianModel
 from eigs.train.gaussian.options import MultiRenderOptions
 from eigs.util.options import Options
+
+log = logging.getLogger(__name__)
 
 
 def rigid_inverse(c2w: Tensor) -> Tensor:
@@ -66,7 +71,8 @@ class MultiRender(Method):
         self.c2w = c2w  # (V, L, 4, 4) float64
         self.response = data.camera_response
         self.blurry = (data.blurry if o.blur_target == "blurry" else self.discrete_targets()).to(device)
-        self.latent = data.latent.to(device) if o.latent_weight > 0 else None  # (V, L, H, W, C)
+        self.latent_weight = self.sharp_frame_weight(data.blurry)
+        self.latent = data.latent.to(device) if self.latent_weight > 0 else None  # (V, L, H, W, C)
         self.valid = torch.from_numpy(data.valid)  # (V, L) latent poses SfM registered
         self.events = EventInputs.from_edi(data.edi, device)
         self.ade: ADE | None = None
@@ -214,6 +220,19 @@ class MultiRender(Method):
         k, j = divmod(i - 1, sub)
         return k + 1 - j / sub
 
+    def sharp_frame_weight(self, blurry: Tensor) -> float:
+        """The latent term's weight: ``latent_weight_dark`` on a dark scene (its blurry frames (V, H, W, C) in [0, 1]
+        hold texture SSIM cannot see: :data:`eigs.metrics.texture.DARK_TEXTURE`), else ``latent_weight``."""
+        o = self.o
+        if o.latent_weight_dark <= 0:
+            return o.latent_weight
+        visibility = ssim_texture_visibility(blurry)
+        dark = visibility < DARK_TEXTURE
+        weight = o.latent_weight_dark if dark else o.latent_weight
+        log.info("blurry frames' texture over SSIM's C2: %.3f (%s below %.2f): sharp-frame weight %g", visibility,
+                 "dark," if dark else "not", DARK_TEXTURE, weight)  # fmt: skip
+        return weight
+
     def blur_weights(self, n: int) -> Tensor:
         """Weights of the n time-ordered renders in the blur average: uniform (Eq. 2) or trapezoidal."""
         if self.o.blur_weights == "uniform" or n == 1:
@@ -263,7 +282,7 @@ class MultiRender(Method):
             else:
                 ok = self.valid[v].to(stack.device)
                 lat, _, _ = photometric_loss(stack[ok], self.latent[v][ok], lam, self.cfg.ssim_range)
-            loss = loss + o.latent_weight * lat
+            loss = loss + self.latent_weight * lat
             terms["latent"] = lat.item()
         if o.consistency and dx is not None:
             x = model.params["means"].detach()

@@ -72,6 +72,10 @@ class MultiRenderOptions(Options):
     # over the latent renders, instead of L1 alone (the D-SSIM asks for local contrast, which L1 on dark frames barely
     # weighs; issue 43, docs/results.md "Why eigs+ renders smooth")
     latent_dssim: bool = False
+    # beyond the paper: the latent term's weight instead of latent_weight on a dark scene, one whose blurry frames'
+    # texture SSIM cannot see (eigs.metrics.texture: median local variance below DARK_TEXTURE × C2), where the blur
+    # term does not ask for the texture and only the latent term can (issue 43; 0: latent_weight on every scene)
+    latent_weight_dark: float = 0.0
     ade_zero_last: bool = False  # beyond the paper: the ADE's last layer starts at zero (no displacement at step 0)
     sharp_one_render: bool = True  # views EDI marks sharp (too few events) use one render and the photometric loss
 
@@ -87,7 +91,8 @@ class MultiRenderOptions(Options):
              "subframes must be >= 1 and blur_weights uniform or trapezoid"),
             (self.blur_target in ("blurry", "discrete") and (self.blur_target == "blurry" or self.subframes == 1),
              "blur_target must be blurry or discrete (discrete needs subframes 1)"),
-            (self.latent_weight >= 0, "latent_weight must be >= 0"),
+            (min(self.latent_weight, self.latent_weight_dark) >= 0,
+             "latent_weight and latent_weight_dark must be >= 0"),
             (0 <= self.discrete_floor < 1, "discrete_floor must lie in [0, 1)"),
         ]  # fmt: skip
         return [msg for ok, msg in checks if not ok]
