@@ -67,7 +67,10 @@ def main() -> None:
     work = cache_dir() / "kernel_phases" / opts.rev
     csrc = work / "csrc"
     csrc.mkdir(parents=True, exist_ok=True)
-    for name in _backend.SOURCES + _backend.HEADERS:
+    # every file of the revision's csrc folder (its file list may differ from this tree's)
+    listing = subprocess.run(["git", "-C", str(ROOT), "ls-tree", "--name-only", f"{opts.rev}:{rel}"], check=True,
+                             capture_output=True, text=True).stdout.split()  # fmt: skip
+    for name in listing:
         data = subprocess.run(["git", "-C", str(ROOT), "show", f"{opts.rev}:{rel}/{name}"], check=True,
                               capture_output=True).stdout  # fmt: skip
         (csrc / name).write_bytes(data)
