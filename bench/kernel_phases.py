@@ -28,6 +28,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
+sys.path.insert(0, str(ROOT))
+from bench.rasterizer import revision_csrc  # noqa: E402
 from eigs.render import _backend  # noqa: E402
 from eigs.util.cache import cache_dir  # noqa: E402
 
@@ -63,16 +65,10 @@ def main() -> None:
     ap.add_argument("--rounds", type=int, default=8)
     ap.add_argument("--runs", type=int, default=2, help="runs of every variant (interleaved over the variants)")
     opts = ap.parse_args()
-    rel = _backend.CSRC.relative_to(ROOT).as_posix()
     work = cache_dir() / "kernel_phases" / opts.rev
     csrc = work / "csrc"
     csrc.mkdir(parents=True, exist_ok=True)
-    # every file of the revision's csrc folder (its file list may differ from this tree's)
-    listing = subprocess.run(["git", "-C", str(ROOT), "ls-tree", "--name-only", f"{opts.rev}:{rel}"], check=True,
-                             capture_output=True, text=True).stdout.split()  # fmt: skip
-    for name in listing:
-        data = subprocess.run(["git", "-C", str(ROOT), "show", f"{opts.rev}:{rel}/{name}"], check=True,
-                              capture_output=True).stdout  # fmt: skip
+    for name, data in revision_csrc(opts.rev).items():
         (csrc / name).write_bytes(data)
     cxx = os.environ.get("CXX", "g++")
     flags = [*_backend.CFLAGS, "-std=c++17", f"-I{csrc}"]

@@ -171,6 +171,17 @@ def time_kernels(
     return best_f, best_b, int(ids.numel()), cpu_f, cpu_b
 
 
+def revision_csrc(rev: str) -> dict[str, bytes]:
+    """Every file of the rasterizer's csrc folder at git revision ``rev``, by name (the revision's own file list,
+    which may differ from this tree's)."""
+    root = Path(__file__).resolve().parents[1]
+    rel = _backend.CSRC.relative_to(root).as_posix()
+    listing = subprocess.run(["git", "-C", str(root), "ls-tree", "--name-only", f"{rev}:{rel}"], check=True,
+                             capture_output=True, text=True).stdout.split()  # fmt: skip
+    return {name: subprocess.run(["git", "-C", str(root), "show", f"{rev}:{rel}/{name}"], check=True,
+                                 capture_output=True).stdout for name in listing}  # fmt: skip
+
+
 def load_revision(rev: str):
     """The extension built from the C++ sources at git revision ``rev`` (same flags as this tree's build), as a
     module of its own name, so that it loads beside this tree's."""
@@ -178,15 +189,7 @@ def load_revision(rev: str):
 
     from eigs.util.cache import cache_dir
 
-    root = Path(__file__).resolve().parents[1]
-    rel = _backend.CSRC.relative_to(root)
-    # every file of the revision's csrc folder (its file list may differ from this tree's), all its .cpp compiled
-    listing = subprocess.run(["git", "-C", str(root), "ls-tree", "--name-only", f"{rev}:{rel.as_posix()}"],
-                             check=True, capture_output=True, text=True).stdout.split()  # fmt: skip
-    files = {}
-    for name in listing:
-        files[name] = subprocess.run(["git", "-C", str(root), "show", f"{rev}:{rel.as_posix()}/{name}"],
-                                     check=True, capture_output=True).stdout  # fmt: skip
+    files = revision_csrc(rev)  # all its .cpp compiled
     h = hashlib.sha256(b"".join(files.values()) + " ".join(_backend.CFLAGS + _backend.LDFLAGS).encode())
     name = f"eigs_render_rev_{h.hexdigest()[:12]}"
     build = cache_dir() / "torch_extensions" / name

@@ -19,9 +19,9 @@ from torch import Tensor
 
 from eigs.errors import EigsError
 from eigs.metrics.pixel import gaussian_window
+from eigs.metrics.sharpness import LUMA
 
 SSIM_C2 = 0.03**2  # SSIM's C2 at data range 1 (K2 = 0.03)
-BT709 = (0.2126, 0.7152, 0.0722)
 WINDOW = 11  # SSIM's window side (px), Gaussian σ = 1.5 px
 # Below this share of C2 a scene's blurry frames count as dark for the sharp-frame term of EiGS (option
 # `latent_weight_dark`, docs/methods.md): the measured scenes split at 0.012–0.026 (346×260) against 0.11–0.54
@@ -36,7 +36,7 @@ def luma(images: Tensor) -> Tensor:
     x = images.to(torch.float64)
     if x.shape[-1] == 1:
         return x[..., 0]
-    return x @ torch.tensor(BT709, dtype=torch.float64)
+    return x @ torch.from_numpy(LUMA).to(torch.float64)  # BT.709, the weights of the sharpness metric
 
 
 def local_variance(y: Tensor) -> Tensor:
