@@ -1,10 +1,12 @@
-"""The 3DGS photometric loss: (1 − λ)·L1 + λ·(1 − SSIM), SSIM in the ``3dgs`` lineage (``eigs.metrics``)."""
+"""The 3DGS photometric loss: (1 − λ)·L1 + λ·(1 − SSIM), SSIM in the ``3dgs`` lineage (``eigs.metrics``): the fused
+kernel (:mod:`eigs.metrics.fused_ssim`) on float32 CPU tensors with a fixed target, else the tensor-op reference."""
 
 from __future__ import annotations
 
 import torch
 from torch import Tensor
 
+from eigs.metrics.fused_ssim import fused_ssim_applies, ssim_fused
 from eigs.metrics.pixel import ssim_torch
 
 
@@ -24,5 +26,7 @@ def photometric_loss(
     l1 = (image - target).abs().mean()
     if lambda_dssim == 0:
         return l1, l1, torch.zeros((), dtype=l1.dtype)
-    dssim = 1.0 - ssim_torch(image.movedim(-1, -3), target.movedim(-1, -3), data_range=ssim_range)  # (…, C, H, W)
+    x, y = image.movedim(-1, -3), target.movedim(-1, -3)  # (…, C, H, W)
+    ssim = ssim_fused if fused_ssim_applies(x, y) else ssim_torch
+    dssim = 1.0 - ssim(x, y, data_range=ssim_range)
     return (1.0 - lambda_dssim) * l1 + lambda_dssim * dssim, l1, dssim
