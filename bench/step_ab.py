@@ -10,7 +10,10 @@ and overall; both builds run on the same machine within minutes of each other, s
 
 Run (a quiet machine): ``.venv/bin/python bench/step_ab.py --against 357e960 --case
 results/toy:config/toy.yaml:eigs+:0 --case results/d346-chair:config/davis346.yaml:eigs+:6500 [--threads 2]
-[--rounds 5] [--out DIR]``; a case is ``RESULTS:CONFIG:RUN:GAUSSIANS`` (0: the init cloud as it is).
+[--rounds 5] [--own-config] [--out DIR]``; a case is ``RESULTS:CONFIG:RUN:GAUSSIANS`` (0: the init cloud as it is).
+The run's options come from this tree's CONFIG for every revision (the same settings timed on each build), or with
+``--own-config`` from each revision's own copy of CONFIG (each build with the settings it had configured, when a
+change of the run's options is part of what is compared).
 """
 
 from __future__ import annotations
@@ -80,6 +83,9 @@ def checkout(rev: str, work: Path) -> Path:
 
 
 def run_child(src: Path, case: str, args: argparse.Namespace) -> dict:
+    if args.own_config:  # CONFIG of the checkout that ``src`` belongs to
+        results, config, run, gaussians = case.split(":")
+        case = ":".join([results, str(src.parent / config), run, gaussians])
     env = {**os.environ, "PYTHONPATH": str(src), "OMP_WAIT_POLICY": "PASSIVE"}
     cmd = [sys.executable, str(Path(__file__).resolve()), "--child", "--case", case, "--threads", str(args.threads),
            "--steps", str(args.steps), "--warm", str(args.warm)]  # fmt: skip
@@ -97,6 +103,7 @@ def main() -> None:
     ap.add_argument("--rounds", type=int, default=5)
     ap.add_argument("--steps", type=int, default=20, help="timed steps per child (the median is kept)")
     ap.add_argument("--warm", type=int, default=5, help="untimed steps first")
+    ap.add_argument("--own-config", action="store_true", help="each revision's own CONFIG (default: this tree's)")
     ap.add_argument("--work", type=Path, default=Path("/tmp/eigs-step-ab"), help="where the worktrees go")
     ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     from bench._report import add_out_argument, table, write_section
@@ -133,12 +140,20 @@ def main() -> None:
     cols = ["run", "image", "Gaussians", "against", "ms then", "ms now", "now / then", "per round"]
     body = (
         f"One training step (`Trainer.train_step`, no densification, {args.threads} threads), this tree against "
-        f"older revisions built from their own sources, interleaved: {args.rounds} rounds, each a fresh process per "
+        f"older revisions built from their own sources, "
+        + ("each with the run's options of its own config file" if args.own_config else
+           "all with the run's options of this tree's config file")
+        + f", interleaved: {args.rounds} rounds, each a fresh process per "
         f"(revision, case) timing the median of {args.steps} steps after {args.warm} untimed ones; the table gives "
         "the median over the rounds and the range of the per-round ratios (`bench/step_ab.py`).\n\n"
         + table(cols, rows) + "\n"
     )  # fmt: skip
-    write_section("step-ab", "Training step against older revisions (issue 46)", body,
+    name, title = (
+        ("step-ab-configured", "Training step against older revisions, each as configured (issue 46)")
+        if args.own_config
+        else ("step-ab", "Training step against older revisions (issue 46)")
+    )
+    write_section(name, title, body,
                   data={"cases": cases, "ms": {f"{k[0]}|{k[1]}": v for k, v in ms.items()}}, out=args.out)  # fmt: skip
     print(body)
 
