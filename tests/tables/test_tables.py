@@ -270,7 +270,7 @@ def test_the_ladder_table_exists_only_with_its_own_runs():
     assert "ladder" not in configured_rows(None, base)  # eigs and eigs+ alone are Tables I-V's rows
     rows = configured_rows(None, [*base, "eigs-zero"])["ladder"]
     assert rows["eigs"] == "eigs" and rows["zero"] == "eigs-zero" and rows["discrete"] is None
-    assert rows["latent"] == "eigs+"
+    assert rows["latent"] is None and rows["sharp"] == "eigs+"
 
 
 def test_motion_columns_are_the_means_over_the_scenes_with_motion(tmp_path):

@@ -90,7 +90,8 @@ TABLES: dict[str, dict] = {
             "zero": {"label": "+ ADE last layer at zero"},
             "discrete": {"label": "+ discrete blur target"},
             "trapezoid": {"label": "+ trapezoid blur weights"},
-            "latent": {"label": "+ latent-frame L1 (= eigs+)"},
+            "latent": {"label": "+ latent-frame L1"},
+            "sharp": {"label": "+ latent D-SSIM, weight by light (= eigs+)"},
         },
     },
 }
