@@ -163,6 +163,33 @@ def seconds(
     raise SystemExit(f"no benchmark and no --estimate for job {name}")
 
 
+def load_speedups(path: Path) -> dict[str, float]:
+    """Per-run step-time factors (now / then, as bench/step_ab.py measures them) from a JSON file's ``factors``.
+
+    Applied to a training job's recorded time they estimate it with today's code: an estimate, stated as one wherever
+    it is printed (issue 46: "a measured per-method speed-up applied to their recorded times")."""
+    try:
+        doc = json.loads(Path(path).read_text())
+        factors = {str(k): float(v) for k, v in doc["factors"].items()}
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as err:
+        raise LedgerError(f"{path}: not a speed-up file ({{'factors': {{run: now / then}}}}): {err}") from None
+    bad = [k for k, v in factors.items() if not (math.isfinite(v) and v > 0)]
+    if bad:
+        raise LedgerError(f"{path}: factors must be finite and > 0: {', '.join(bad)}")
+    return factors
+
+
+def sped_up(times: dict[str, float], factors: dict[str, float]) -> dict[str, float]:
+    """``times`` with every training job of a run in ``factors`` scaled by its factor (keys ``train:SCENE:RUN``)."""
+    out = dict(times)
+    for j, t in times.items():
+        rule, _, rest = j.partition(":")
+        run = rest.split(":", 1)[-1]
+        if rule == "train" and run in factors:
+            out[j] = t * factors[run]
+    return out
+
+
 def simulate(jobs: dict, times: dict[str, float], cores: int) -> float:
     """Makespan (s) of list scheduling, longest remaining path first."""
     succ: dict[str, list[str]] = {j: [] for j in jobs}
@@ -209,6 +236,8 @@ def main() -> None:
     ap.add_argument("--directory", type=Path, default=None, help="workflow directory with a finished run's benchmarks/")
     ap.add_argument("--cores", type=int, nargs="+", default=[2, 8])
     ap.add_argument("--estimate", action="append", default=[], metavar="RULE[:RUN]=SECONDS")
+    ap.add_argument("--speedups", type=Path, default=None,
+                    help="JSON {'factors': {run: now / then}}: training times scaled by their factor")  # fmt: skip
     ap.add_argument(
         "--column",
         choices=("s", "cpu_time"),
@@ -220,6 +249,12 @@ def main() -> None:
     est = {k: float(v) for k, v in (e.split("=", 1) for e in args.estimate)}
     jobs = jobs_of(cfg)
     times = {j: seconds(args.directory, jobs[j][0], est, args.column, jobs[j][2]) for j in jobs}
+    if args.speedups is not None:
+        try:
+            times = sped_up(times, load_speedups(args.speedups))
+        except LedgerError as err:
+            raise SystemExit(f"schedule.py: error: {err}") from None
+        print(f"training times scaled by the step speed-ups of {args.speedups} (an estimate)")
     print(f"{len(jobs)} jobs, {sum(times.values()) / 3600:.2f} h of job time in total")
     for c in args.cores:
         print(f"--cores {c}: {simulate(jobs, times, c) / 3600:.2f} h")

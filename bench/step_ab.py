@@ -46,7 +46,9 @@ def child(args: argparse.Namespace) -> None:
         from eigs.train.loop import Trainer  # type: ignore[no-redef]
     torch.set_num_threads(args.threads)
     results, config, run, gaussians = args.case[0].split(":")
-    r, b = Path(results), Path(results) / "b4"
+    spec = yaml.safe_load(Path(config).read_text())["runs"][run]
+    r = Path(results)
+    b = r / f"b{spec.get('bins', 4)}"  # the run's own B (Table III's rows)
     data = load_train_data(r / "scene.h5", b / "edi.h5", b / "sfm", b / "init.ply")
     n = int(gaussians)
     if n > 0:  # the same draw as bench/train.py's resized_cloud
@@ -56,7 +58,6 @@ def child(args: argparse.Namespace) -> None:
         jitter = rng.normal(0, 1e-3, (n, 3)).astype(np.float32)
         data.init = GaussianCloud(c.means[idx] + jitter, c.f_dc[idx], c.f_rest[idx], c.opacity[idx],
                                   c.log_scales[idx], c.quats[idx])  # fmt: skip
-    spec = yaml.safe_load(Path(config).read_text())["runs"][run]
     opts = spec.get("options", {})
     cfg = TrainConfig.from_dict({"method": spec["method"], "densify": False,
                                  "method_options": opts.get("method_options", {})})  # fmt: skip

@@ -24,7 +24,7 @@ import yaml
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench._report import machine, table  # noqa: E402
 from bench.plateau_reference import reference_dir  # noqa: E402
-from bench.schedule import LedgerError, job_time, jobs_of, simulate  # noqa: E402
+from bench.schedule import LedgerError, job_time, jobs_of, load_speedups, simulate, sped_up  # noqa: E402
 from eigs.util.atomic import atomic_path  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
@@ -83,8 +83,15 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=REPO / "docs" / "suite.md")
     ap.add_argument("--readme", type=Path, default=None,
                     help=f"also write the report into this file, between its {BEGIN} and {END} lines")  # fmt: skip
+    ap.add_argument("--speedups", type=Path, default=None,
+                    help="JSON {'factors': {run: now / then}} (bench/step_ab.py): adds the schedule with the training "
+                         "times scaled by them")  # fmt: skip
     args = ap.parse_args()
     cfg = yaml.safe_load(args.config.read_text())
+    try:
+        factors = load_speedups(args.speedups) if args.speedups is not None else None
+    except LedgerError as err:
+        raise SystemExit(f"suite_report.py: error: {err}") from None
     jobs = jobs_of(cfg)
     try:
         times = {j: job_time(args.directory, jobs[j][0], jobs[j][2]) for j in jobs}
@@ -167,11 +174,22 @@ def main() -> None:
     if all(j.split(":", 1)[0] in UNMEASURED_RULES for j in missing):
         cpu_times = {j: t[1] for j, t in done.items()} | {j: 0.0 for j in missing}
         sched = [[c, f"{simulate(jobs, cpu_times, c) / 3600:.2f}"] for c in (1, 2, 8)]
+        cols = ["cores", "hours"]
+        note = ""
+        if factors is not None:
+            scaled = sped_up(cpu_times, factors)
+            for row, c in zip(sched, (1, 2, 8), strict=True):
+                row.append(f"{simulate(jobs, scaled, c) / 3600:.2f}")
+            cols.append("hours, today's step")
+            shown = ", ".join(f"`{r}` {f:.2f}" for r, f in sorted(factors.items()))
+            note = (f" `hours, today's step`: an estimate, every training job's recorded time multiplied by its run's "
+                    f"step-time ratio today / when the ledger was trained, measured by bench/step_ab.py "
+                    f"(`{args.speedups.name}`; runs not listed unchanged): {shown}.")  # fmt: skip
         md += ["## Schedule\n", "`snakemake --cores N all` simulated from the per-job CPU times (bench/schedule.py: a "
                "job starts when its inputs exist and its threads are free, longest remaining path first)"
                + (f"; the {' and '.join(sorted({j.split(':', 1)[0] for j in missing}))} jobs not measured, counted as "
-                  "0 s" if missing else "") + ".\n",
-               table(["cores", "hours"], sched), ""]  # fmt: skip
+                  "0 s" if missing else "") + "." + note + "\n",
+               table(cols, sched), ""]  # fmt: skip
     for tables in (args.directory / "results" / "tables" / "tables.md", args.directory / "tables" / "tables.md"):
         if tables.exists():
             md += ["## Tables\n", tables.read_text()]

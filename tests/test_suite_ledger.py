@@ -367,6 +367,45 @@ def test_schedule_of_a_complete_ledger_without_tables_and_figures_jobs(workflow,
     assert "## Schedule" in text and "the figures and tables and video jobs not measured, counted as 0 s" in text
 
 
+def test_speedups_scale_only_the_listed_runs_trainings(tmp_path):
+    times = {"train:a:eigs+": 100.0, "train:b:eigs+": 50.0, "train:a:3dgs": 10.0, "evaluate:a:eigs+": 4.0,
+             "sfm:a:4": 30.0}  # fmt: skip
+    got = schedule.sped_up(times, {"eigs+": 0.5, "nerf": 2.0})
+    assert got == {"train:a:eigs+": 50.0, "train:b:eigs+": 25.0, "train:a:3dgs": 10.0, "evaluate:a:eigs+": 4.0,
+                   "sfm:a:4": 30.0}  # fmt: skip
+    # one core runs everything one after the other: the makespan is the sum of the job times
+    jobs = {j: (j, [], 1) for j in times}
+    assert schedule.simulate(jobs, got, 1) == pytest.approx(sum(got.values()))
+    good = tmp_path / "s.json"
+    good.write_text(json.dumps({"factors": {"eigs+": 0.7}}))
+    assert schedule.load_speedups(good) == {"eigs+": 0.7}
+    for doc in ({"eigs+": 0.7}, {"factors": {"eigs+": -1}}, {"factors": {"eigs+": "nan"}}, "x"):
+        bad = tmp_path / "bad.json"
+        bad.write_text(json.dumps(doc))
+        with pytest.raises(schedule.LedgerError, match="bad.json"):
+            schedule.load_speedups(bad)
+
+
+def test_suite_report_adds_the_schedule_with_the_speedups(workflow, tmp_path, capsys, monkeypatch):
+    cfg, d = workflow
+    run_folder(d / "results/beta/b4/eigs", "beta", "eigs")
+    benchmark(d / "benchmarks/train/beta_b4_eigs.tsv", 500.0, 480.0)
+    eval_folder(d / "results/beta/b4/eval/eigs", "beta", "eigs")
+    for scene in ("alpha", "beta"):
+        benchmark(d / "benchmarks" / "evaluate" / f"{scene}_b4_eigs.tsv", 5.0, 4.0)
+    ledger = tmp_path / "ledger"
+    ledger_main("save", "--directory", d, "--config", cfg, "--ledger", ledger, capsys=capsys)
+    speed = tmp_path / "speed.json"
+    speed.write_text(json.dumps({"factors": {"eigs": 0.5}}))
+    report = tmp_path / "suite.md"
+    monkeypatch.setattr(sys, "argv", ["suite_report.py", "--directory", str(ledger), "--config", str(cfg),
+                                      "--out", str(report), "--speedups", str(speed)])  # fmt: skip
+    suite_report.main()
+    rows = [ln for ln in report.read_text().split("## Schedule")[1].splitlines() if ln.startswith("| 1 |")]
+    hours, scaled = (float(v) for v in rows[0].strip("| ").split(" | ")[1:3])
+    assert scaled < hours and "`eigs` 0.50" in report.read_text()
+
+
 @pytest.mark.parametrize(
     "content",
     [
