@@ -23,6 +23,7 @@ import torch.nn.functional as F
 from torch import Tensor
 
 from eigs.artifacts.field import FieldArrays
+from eigs.render.trilinear import trilinear
 from eigs.render.volume import TAU_MAX, composite, distortion, ray_aabb
 
 TRANS_MIN = 1e-4  # samples behind a transmittance this low are not composited
@@ -190,9 +191,7 @@ def query(field: FieldTensors, pts: Tensor, density_only: bool = False) -> Tenso
 def query_warped(field: FieldTensors, u: Tensor, density_only: bool = False) -> Tensor:
     """:func:`query` at normalised grid coordinates ``u`` (N, 3) in [0, 1] (:func:`warp_coords` of the points)."""
     grid = field.grid[:, :1] if density_only else field.grid
-    g = u * 2.0 - 1.0
-    out = F.grid_sample(grid, g.reshape(1, 1, 1, -1, 3), mode="bilinear", padding_mode="border", align_corners=True)
-    out = out.reshape(grid.shape[1], -1).T
+    out = trilinear(grid, u)  # (N, 1 + C)
     if field.vm is None or (density_only and not field.vm.density_planes):
         return out
     return out + vm_query(field.vm, u, density_only)
