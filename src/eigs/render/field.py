@@ -230,6 +230,12 @@ def _occupied_along(
     return occ.reshape(-1)[flat], flat, None
 
 
+def _gather(x: Tensor, rows: Tensor, cols: Tensor) -> Tensor:
+    """``x[rows, cols]`` for ``x`` (R, S, …) as one ``index_select`` on the flattened first two axes (the same values;
+    PyTorch's two-tensor advanced indexing took 3–10 times longer on the CPU)."""
+    return x.reshape(x.shape[0] * x.shape[1], *x.shape[2:]).index_select(0, rows * x.shape[1] + cols)
+
+
 def render_rays(
     field: FieldTensors,
     origins: Tensor,
@@ -266,18 +272,19 @@ def render_rays(
 
     def at(r: Tensor, k: Tensor, density_only: bool = False) -> Tensor:
         if u is not None:
-            return query_warped(field, u[r, k], density_only)
-        return query(field, origins[r] + t[r, k, None] * dirs[r], density_only)
+            return query_warped(field, _gather(u, r, k), density_only)
+        pts = origins.index_select(0, r) + _gather(t, r, k).unsqueeze(-1) * dirs.index_select(0, r)
+        return query(field, pts, density_only)
 
     if rows.numel():  # drop the samples behind opaque ones (density-only pass, no gradient)
         with torch.no_grad():
-            slot = (torch.cumsum(keep, dim=1) - 1)[rows, cols]
+            slot = _gather(torch.cumsum(keep, dim=1) - 1, rows, cols)
             width = int(slot.max()) + 1
             sig = F.softplus(at(rows, cols, density_only=True)[:, 0] + field.density_shift) * field.density_scale
             tau = (sig * delta[rows, 0]).clamp(0.0, TAU_MAX)
             packed = torch.zeros((n_rays, width), dtype=tau.dtype, device=tau.device).index_put((rows, slot), tau)
             excl = torch.cumsum(packed, dim=1) - packed
-            live = excl[rows, slot] <= -math.log(TRANS_MIN)
+            live = _gather(excl, rows, slot) <= -math.log(TRANS_MIN)
             rows, cols, slot = rows[live], cols[live], slot[live]
     else:
         slot = rows
@@ -290,9 +297,10 @@ def render_rays(
     deltas = delta.expand(-1, width)
     rgb, acc, weights = composite(sigmas, colours, deltas, background.to(raw.dtype))
     if stats is not None:
-        stats["voxels"] = flat[rows, cols]
-        stats["weights"] = weights.detach()[rows, slot]
-        pos = raw.new_zeros((n_rays, width)).index_put((rows, slot), frac.expand_as(t)[rows, cols].to(raw.dtype))
+        stats["voxels"] = _gather(flat, rows, cols)
+        stats["weights"] = _gather(weights.detach(), rows, slot)
+        at_pos = _gather(frac.expand_as(t), rows, cols).to(raw.dtype)
+        pos = raw.new_zeros((n_rays, width)).index_put((rows, slot), at_pos)
         stats["distortion"] = distortion(weights, pos, torch.full_like(pos, 1.0 / s))
     return rgb, acc
 
