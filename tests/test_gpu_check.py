@@ -20,7 +20,7 @@ from bench import gpu_check
 
 REPO = Path(__file__).resolve().parents[1]
 PLUS = {"pose_prior": True, "ade_zero_last": True, "blur_target": "discrete", "blur_weights": "trapezoid",
-        "latent_weight": 0.5}  # fmt: skip
+        "latent_weight": 0.5, "latent_dssim": True, "latent_weight_dark": 2.0}  # fmt: skip
 
 
 def suite_config() -> dict:

@@ -348,7 +348,8 @@ def test_report_spliced_into_a_readme_block():
         suite_report.splice("# Project\n", report, "NOTES.md")
 
 
-def test_schedule_of_a_complete_ledger_without_tables_and_figures_jobs(workflow, tmp_path, capsys, monkeypatch):
+def complete_ledger(workflow, tmp_path, capsys):
+    """The hand-built workflow with its last training and evaluations added, saved as a ledger: (config, ledger)."""
     cfg, d = workflow
     run_folder(d / "results/beta/b4/eigs", "beta", "eigs")
     benchmark(d / "benchmarks/train/beta_b4_eigs.tsv", 500.0, 480.0)
@@ -357,6 +358,11 @@ def test_schedule_of_a_complete_ledger_without_tables_and_figures_jobs(workflow,
         benchmark(d / "benchmarks" / "evaluate" / f"{scene}_b4_eigs.tsv", 5.0, 4.0)
     ledger = tmp_path / "ledger"
     ledger_main("save", "--directory", d, "--config", cfg, "--ledger", ledger, capsys=capsys)
+    return cfg, ledger
+
+
+def test_schedule_of_a_complete_ledger_without_tables_and_figures_jobs(workflow, tmp_path, capsys, monkeypatch):
+    cfg, ledger = complete_ledger(workflow, tmp_path, capsys)
     _, out, _ = ledger_main("missing", "--config", cfg, "--ledger", ledger, capsys=capsys)
     assert out == ""
     report = tmp_path / "suite.md"
@@ -387,14 +393,7 @@ def test_speedups_scale_only_the_listed_runs_trainings(tmp_path):
 
 
 def test_suite_report_adds_the_schedule_with_the_speedups(workflow, tmp_path, capsys, monkeypatch):
-    cfg, d = workflow
-    run_folder(d / "results/beta/b4/eigs", "beta", "eigs")
-    benchmark(d / "benchmarks/train/beta_b4_eigs.tsv", 500.0, 480.0)
-    eval_folder(d / "results/beta/b4/eval/eigs", "beta", "eigs")
-    for scene in ("alpha", "beta"):
-        benchmark(d / "benchmarks" / "evaluate" / f"{scene}_b4_eigs.tsv", 5.0, 4.0)
-    ledger = tmp_path / "ledger"
-    ledger_main("save", "--directory", d, "--config", cfg, "--ledger", ledger, capsys=capsys)
+    cfg, ledger = complete_ledger(workflow, tmp_path, capsys)
     speed = tmp_path / "speed.json"
     speed.write_text(json.dumps({"factors": {"eigs": 0.5}}))
     report = tmp_path / "suite.md"

@@ -17,7 +17,7 @@ import torch
 from torch import Tensor
 from torch.autograd.function import once_differentiable
 
-from eigs.metrics.pixel import K1, K2, gaussian_window
+from eigs.metrics.pixel import K1, K2, as_planes, gaussian_window, reduce_ssim_map
 from eigs.util.extension import load_extension
 
 CSRC = Path(__file__).resolve().parent / "csrc"
@@ -59,21 +59,10 @@ def ssim_fused(x: Tensor, y: Tensor, reduction: str = "mean", data_range: float 
     if not fused_ssim_applies(x, y):
         raise ValueError(f"ssim_fused takes float32 CPU tensors of one shape, y without gradient; got "
                          f"{tuple(x.shape)} {x.dtype} {x.device}, {tuple(y.shape)} {y.dtype} {y.device}")  # fmt: skip
-    if x.dim() not in (3, 4):
-        raise ValueError(f"expected (C, H, W) or (N, C, H, W), got {tuple(x.shape)}")
     if not (data_range > 0 and data_range < float("inf")):
         raise ValueError(f"data_range must be finite and > 0, got {data_range}")
-    batched = x.dim() == 4
-    if not batched:
-        x, y = x.unsqueeze(0), y.unsqueeze(0)
-    n, c, h, w = x.shape
+    xp, yp, n, batched = as_planes(x, y)
     window = gaussian_window(WINDOW, SIGMA, dtype=torch.float32)
     c1, c2 = (K1 * data_range) ** 2, (K2 * data_range) ** 2
-    planes = (x.reshape(n * c, h, w).contiguous(), y.reshape(n * c, h, w).contiguous())
-    smap = _SSIMMap.apply(*planes, window, c1, c2)  # (N C, H, W)
-    if reduction == "mean":
-        return smap.mean()
-    if reduction == "none":
-        per_image = smap.reshape(n, -1).mean(dim=1)
-        return per_image if batched else per_image[0]
-    raise ValueError(f"reduction must be 'mean' or 'none', got {reduction!r}")
+    smap = _SSIMMap.apply(xp.contiguous(), yp.contiguous(), window, c1, c2)  # (N C, H, W)
+    return reduce_ssim_map(smap, n, batched, reduction)

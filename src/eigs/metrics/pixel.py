@@ -153,14 +153,26 @@ def ssim_torch(
         raise ValueError(f"shapes differ: {tuple(x.shape)} vs {tuple(y.shape)}")
     if not (math.isfinite(data_range) and data_range > 0):
         raise ValueError(f"data_range must be finite and > 0, got {data_range}")
+    xp, yp, n, batched = as_planes(x, y)
+    window = gaussian_window(window_size, sigma, dtype=x.dtype).to(x.device)
+    return reduce_ssim_map(_ssim_map(xp, yp, window, "zeros", data_range, 1.0), n, batched, reduction)
+
+
+def as_planes(x: torch.Tensor, y: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, int, bool]:
+    """``(N, C, H, W)`` or ``(C, H, W)`` images as single-channel planes ``(N·C, H, W)``, with N and whether they
+    were batched (the SSIM's input convention; :func:`ssim_torch`, :func:`eigs.metrics.fused_ssim.ssim_fused`)."""
     if x.dim() not in (3, 4):
         raise ValueError(f"expected (C, H, W) or (N, C, H, W), got {tuple(x.shape)}")
     batched = x.dim() == 4
     if not batched:
         x, y = x.unsqueeze(0), y.unsqueeze(0)
     n, c, h, w = x.shape
-    window = gaussian_window(window_size, sigma, dtype=x.dtype).to(x.device)
-    smap = _ssim_map(x.reshape(n * c, h, w), y.reshape(n * c, h, w), window, "zeros", data_range, 1.0)
+    return x.reshape(n * c, h, w), y.reshape(n * c, h, w), n, batched
+
+
+def reduce_ssim_map(smap: torch.Tensor, n: int, batched: bool, reduction: str) -> torch.Tensor:
+    """An SSIM map ``(N·C, H, W)`` reduced as :func:`ssim_torch` documents: ``"mean"`` a scalar, ``"none"`` ``(N,)``
+    per image (``()`` when the input was one image)."""
     if reduction == "mean":
         return smap.mean()
     if reduction == "none":

@@ -58,6 +58,21 @@ EIGS_ROW_CLONES void vertical_row(const float* const* __restrict__ rows, float* 
     }
 }
 
+// The SSIM's four factors at one pixel from its five moments: S = (A1 B1) / (A2 B2), B2 the floored B2raw.
+struct Terms {
+    float a1, b1, a2, b2raw, b2;
+};
+
+inline Terms ssim_terms(float mx, float my, float exx, float eyy, float exy, float c1, float c2) {
+    const float vx = exx - mx * mx;
+    const float vy = eyy - my * my;
+    const float cv = exy - mx * my;
+    const float b2raw = vx + vy + c2;
+    // var_x + var_y can round to a tiny negative value; the floor keeps the denominator >= c1 c2 / 2 > 0
+    const float floor = c2 / 2;
+    return {2 * mx * my + c1, 2 * cv + c2, mx * mx + my * my + c1, b2raw, b2raw >= floor ? b2raw : floor};
+}
+
 // The SSIM of one row from its five moments (mom[0..4]: mu_x, mu_y, E[x^2], E[y^2], E[xy]) and, when d_mx is not
 // null, its three partial derivatives.
 EIGS_ROW_CLONES void ssim_row(const float* const* __restrict__ mom, int64_t n, float c1, float c2,
@@ -68,36 +83,20 @@ EIGS_ROW_CLONES void ssim_row(const float* const* __restrict__ mom, int64_t n, f
     const float* __restrict__ exx = mom[2];
     const float* __restrict__ eyy = mom[3];
     const float* __restrict__ exy = mom[4];
-    const float floor = c2 / 2;
     for (int64_t j = 0; j < n; ++j) {
-        const float vx = exx[j] - mx[j] * mx[j];
-        const float vy = eyy[j] - my[j] * my[j];
-        const float cv = exy[j] - mx[j] * my[j];
-        const float a1 = 2 * mx[j] * my[j] + c1;
-        const float b1 = 2 * cv + c2;
-        const float a2 = mx[j] * mx[j] + my[j] * my[j] + c1;
-        const float b2raw = vx + vy + c2;
-        // var_x + var_y can round to a tiny negative value; the floor keeps the denominator >= c1 c2 / 2 > 0
-        const float b2 = b2raw >= floor ? b2raw : floor;
-        s[j] = (a1 * b1) / (a2 * b2);
+        const Terms q = ssim_terms(mx[j], my[j], exx[j], eyy[j], exy[j], c1, c2);
+        s[j] = (q.a1 * q.b1) / (q.a2 * q.b2);
     }
     if (d_mx == nullptr) return;
     for (int64_t j = 0; j < n; ++j) {
-        const float vx = exx[j] - mx[j] * mx[j];
-        const float vy = eyy[j] - my[j] * my[j];
-        const float cv = exy[j] - mx[j] * my[j];
-        const float a1 = 2 * mx[j] * my[j] + c1;
-        const float b1 = 2 * cv + c2;
-        const float a2 = mx[j] * mx[j] + my[j] * my[j] + c1;
-        const float b2raw = vx + vy + c2;
-        const float open = b2raw >= floor ? 1.0f : 0.0f;  // the clamp passes the gradient where it does not bind
-        const float b2 = b2raw >= floor ? b2raw : floor;
-        const float den = a2 * b2;
+        const Terms q = ssim_terms(mx[j], my[j], exx[j], eyy[j], exy[j], c1, c2);
+        const float open = q.b2raw >= c2 / 2 ? 1.0f : 0.0f;  // the clamp passes the gradient where it does not bind
+        const float den = q.a2 * q.b2;
         const float sj = s[j];
         // D = A2 B2: dD/dmu_x = 2 mu_x B2 - 2 mu_x A2 [open], dD/dE[x^2] = A2 [open]; N = A1 B1: dN/dE[xy] = 2 A1
-        d_mx[j] = (2 * my[j] * (b1 - a1) - sj * (2 * mx[j] * (b2 - a2 * open))) / den;
-        d_exx[j] = -sj * (a2 * open) / den;
-        d_exy[j] = 2 * a1 / den;
+        d_mx[j] = (2 * my[j] * (q.b1 - q.a1) - sj * (2 * mx[j] * (q.b2 - q.a2 * open))) / den;
+        d_exx[j] = -sj * (q.a2 * open) / den;
+        d_exy[j] = 2 * q.a1 / den;
     }
 }
 

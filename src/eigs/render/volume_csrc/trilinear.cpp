@@ -37,6 +37,32 @@ inline Corner axis(float u, int64_t size) {
     return {i0, i1, p - float(i0), inside};
 }
 
+// The eight corners of point i's cell (flat voxel indices, z-major) and their trilinear weights.
+struct Cell {
+    Corner x, y, z;
+    int64_t k[8];
+    float wt[8];
+};
+
+inline Cell cell_of(const float* up, int64_t i, int64_t d, int64_t h, int64_t w) {
+    Cell c;
+    c.x = axis(up[3 * i], w);
+    c.y = axis(up[3 * i + 1], h);
+    c.z = axis(up[3 * i + 2], d);
+    const Corner& x = c.x;
+    const Corner& y = c.y;
+    const Corner& z = c.z;
+    const float gx = 1.0f - x.f, gy = 1.0f - y.f, gz = 1.0f - z.f;
+    int q = 0;
+    for (int a = 0; a < 2; ++a)
+        for (int b = 0; b < 2; ++b)
+            for (int e = 0; e < 2; ++e, ++q) {
+                c.k[q] = ((a ? z.i1 : z.i0) * h + (b ? y.i1 : y.i0)) * w + (e ? x.i1 : x.i0);
+                c.wt[q] = (a ? z.f : gz) * (b ? y.f : gy) * (e ? x.f : gx);
+            }
+    return c;
+}
+
 void check(const torch::Tensor& grid, const torch::Tensor& u) {
     TORCH_CHECK(grid.dim() == 4 && grid.scalar_type() == torch::kFloat32 && grid.device().is_cpu() &&
                     grid.is_contiguous(),
@@ -56,17 +82,10 @@ torch::Tensor trilinear_fwd(const torch::Tensor& grid, const torch::Tensor& u) {
     float* o = out.data_ptr<float>();
     at::parallel_for(0, n, 2048, [&](int64_t begin, int64_t end) {
         for (int64_t i = begin; i < end; ++i) {
-            const Corner x = axis(up[3 * i], w), y = axis(up[3 * i + 1], h), z = axis(up[3 * i + 2], d);
-            const int64_t k[8] = {(z.i0 * h + y.i0) * w + x.i0, (z.i0 * h + y.i0) * w + x.i1,
-                                  (z.i0 * h + y.i1) * w + x.i0, (z.i0 * h + y.i1) * w + x.i1,
-                                  (z.i1 * h + y.i0) * w + x.i0, (z.i1 * h + y.i0) * w + x.i1,
-                                  (z.i1 * h + y.i1) * w + x.i0, (z.i1 * h + y.i1) * w + x.i1};
-            const float gx = 1.0f - x.f, gy = 1.0f - y.f, gz = 1.0f - z.f;
-            const float wt[8] = {gz * gy * gx, gz * gy * x.f, gz * y.f * gx, gz * y.f * x.f,
-                                 z.f * gy * gx, z.f * gy * x.f, z.f * y.f * gx, z.f * y.f * x.f};
+            const Cell cl = cell_of(up, i, d, h, w);
             for (int64_t ch = 0; ch < c; ++ch) {
                 float s = 0.0f;
-                for (int q = 0; q < 8; ++q) s += wt[q] * g[k[q] * c + ch];
+                for (int q = 0; q < 8; ++q) s += cl.wt[q] * g[cl.k[q] * c + ch];
                 o[i * c + ch] = s;
             }
         }
@@ -96,18 +115,14 @@ std::vector<torch::Tensor> trilinear_bwd(const torch::Tensor& grid, const torch:
     at::parallel_for(0, n, 2048, [&](int64_t begin, int64_t end) {
         float* vg = need_grid ? parts[size_t(std::min(at::get_thread_num(), threads - 1))].data_ptr<float>() : nullptr;
         for (int64_t i = begin; i < end; ++i) {
-            const Corner x = axis(up[3 * i], w), y = axis(up[3 * i + 1], h), z = axis(up[3 * i + 2], d);
-            const int64_t k[8] = {(z.i0 * h + y.i0) * w + x.i0, (z.i0 * h + y.i0) * w + x.i1,
-                                  (z.i0 * h + y.i1) * w + x.i0, (z.i0 * h + y.i1) * w + x.i1,
-                                  (z.i1 * h + y.i0) * w + x.i0, (z.i1 * h + y.i0) * w + x.i1,
-                                  (z.i1 * h + y.i1) * w + x.i0, (z.i1 * h + y.i1) * w + x.i1};
+            const Cell cl = cell_of(up, i, d, h, w);
+            const Corner &x = cl.x, &y = cl.y, &z = cl.z;
+            const int64_t* k = cl.k;
             const float gx = 1.0f - x.f, gy = 1.0f - y.f, gz = 1.0f - z.f;
             if (vg != nullptr) {
-                const float wt[8] = {gz * gy * gx, gz * gy * x.f, gz * y.f * gx, gz * y.f * x.f,
-                                     z.f * gy * gx, z.f * gy * x.f, z.f * y.f * gx, z.f * y.f * x.f};
                 for (int q = 0; q < 8; ++q) {
                     float* vgk = vg + k[q] * c;
-                    for (int64_t ch = 0; ch < c; ++ch) vgk[ch] += wt[q] * vo[i * c + ch];
+                    for (int64_t ch = 0; ch < c; ++ch) vgk[ch] += cl.wt[q] * vo[i * c + ch];
                 }
             }
             if (vu != nullptr) {
