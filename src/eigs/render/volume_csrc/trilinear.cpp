@@ -9,8 +9,9 @@
 // Shapes: grid (D, H, W, C) float32 contiguous (channels last); u (N, 3) float32 contiguous; out (N, C); v_out (N, C).
 // Coordinates: p = u (size - 1), clamped to [0, size - 1] (border padding); the gradient with respect to a
 // coordinate is zero where p <= 0 or p >= size - 1, as grid_sample's border padding sets it.
-// Precision: float32, the eight corner products summed in a fixed order; the grid gradient summed per thread and
-// then over threads, so it depends on the thread count at the float32 rounding level.
+// Precision: float32, the eight corner products summed in a fixed order; the grid gradient summed per slice of the
+// points (one per thread, at most 256 MB of gradient grids) and then over the slices, so it depends on the slice
+// count at the float32 rounding level and not on the scheduling.
 #include <torch/extension.h>
 
 #include <ATen/Parallel.h>
@@ -20,6 +21,8 @@
 #include <vector>
 
 namespace {
+
+constexpr int64_t kScratchBytes = int64_t(256) << 20;  // the backward's per-slice gradient grids, at most
 
 struct Corner {
     int64_t i0, i1;  // the two neighbours along the axis
@@ -106,49 +109,55 @@ std::vector<torch::Tensor> trilinear_bwd(const torch::Tensor& grid, const torch:
     const float* vo = v_out.data_ptr<float>();
     auto v_u = need_u ? torch::zeros({n, 3}, u.options()) : torch::empty({0}, u.options());
     float* vu = need_u ? v_u.data_ptr<float>() : nullptr;
-    const int threads = std::max(1, at::get_num_threads());
-    // one gradient grid per thread slot (slot 0 is the output), summed at the end
+    // The points split into `slices` contiguous ranges, one task each; with need_grid each slice scatters into its own
+    // gradient grid (slice 0's is the output) and the grids are summed at the end. At most one slice per thread, and
+    // no more than kScratchBytes of grids: the sum does not depend on the scheduling, only on the slice count.
+    const int64_t grid_bytes = grid.numel() * int64_t(sizeof(float));
+    int64_t slices = std::max<int64_t>(1, std::min<int64_t>(at::get_num_threads(), (n + 2047) / 2048));
+    if (need_grid) slices = std::max<int64_t>(1, std::min(slices, kScratchBytes / std::max<int64_t>(grid_bytes, 1)));
     std::vector<torch::Tensor> parts;
     if (need_grid)
-        for (int t = 0; t < threads; ++t) parts.push_back(torch::zeros({d, h, w, c}, grid.options()));
+        for (int64_t s = 0; s < slices; ++s) parts.push_back(torch::zeros({d, h, w, c}, grid.options()));
     const float sx = float(w - 1), sy = float(h - 1), sz = float(d - 1);
-    at::parallel_for(0, n, 2048, [&](int64_t begin, int64_t end) {
-        float* vg = need_grid ? parts[size_t(std::min(at::get_thread_num(), threads - 1))].data_ptr<float>() : nullptr;
-        for (int64_t i = begin; i < end; ++i) {
-            const Cell cl = cell_of(up, i, d, h, w);
-            const Corner &x = cl.x, &y = cl.y, &z = cl.z;
-            const int64_t* k = cl.k;
-            const float gx = 1.0f - x.f, gy = 1.0f - y.f, gz = 1.0f - z.f;
-            if (vg != nullptr) {
-                for (int q = 0; q < 8; ++q) {
-                    float* vgk = vg + k[q] * c;
-                    for (int64_t ch = 0; ch < c; ++ch) vgk[ch] += cl.wt[q] * vo[i * c + ch];
+    at::parallel_for(0, slices, 1, [&](int64_t s_begin, int64_t s_end) {
+        for (int64_t s = s_begin; s < s_end; ++s) {
+            float* vg = need_grid ? parts[size_t(s)].data_ptr<float>() : nullptr;
+            for (int64_t i = n * s / slices; i < n * (s + 1) / slices; ++i) {
+                const Cell cl = cell_of(up, i, d, h, w);
+                const Corner &x = cl.x, &y = cl.y, &z = cl.z;
+                const int64_t* k = cl.k;
+                const float gx = 1.0f - x.f, gy = 1.0f - y.f, gz = 1.0f - z.f;
+                if (vg != nullptr) {
+                    for (int q = 0; q < 8; ++q) {
+                        float* vgk = vg + k[q] * c;
+                        for (int64_t ch = 0; ch < c; ++ch) vgk[ch] += cl.wt[q] * vo[i * c + ch];
+                    }
                 }
-            }
-            if (vu != nullptr) {
-                float dx = 0.0f, dy = 0.0f, dz = 0.0f;
-                for (int64_t ch = 0; ch < c; ++ch) {
-                    const float v = vo[i * c + ch];
-                    const float c000 = g[k[0] * c + ch], c001 = g[k[1] * c + ch], c010 = g[k[2] * c + ch];
-                    const float c011 = g[k[3] * c + ch], c100 = g[k[4] * c + ch], c101 = g[k[5] * c + ch];
-                    const float c110 = g[k[6] * c + ch], c111 = g[k[7] * c + ch];
-                    dx += v * (gz * (gy * (c001 - c000) + y.f * (c011 - c010)) +
-                               z.f * (gy * (c101 - c100) + y.f * (c111 - c110)));
-                    dy += v * (gz * (gx * (c010 - c000) + x.f * (c011 - c001)) +
-                               z.f * (gx * (c110 - c100) + x.f * (c111 - c101)));
-                    dz += v * (gy * (gx * (c100 - c000) + x.f * (c101 - c001)) +
-                               y.f * (gx * (c110 - c010) + x.f * (c111 - c011)));
+                if (vu != nullptr) {
+                    float dx = 0.0f, dy = 0.0f, dz = 0.0f;
+                    for (int64_t ch = 0; ch < c; ++ch) {
+                        const float v = vo[i * c + ch];
+                        const float c000 = g[k[0] * c + ch], c001 = g[k[1] * c + ch], c010 = g[k[2] * c + ch];
+                        const float c011 = g[k[3] * c + ch], c100 = g[k[4] * c + ch], c101 = g[k[5] * c + ch];
+                        const float c110 = g[k[6] * c + ch], c111 = g[k[7] * c + ch];
+                        dx += v * (gz * (gy * (c001 - c000) + y.f * (c011 - c010)) +
+                                   z.f * (gy * (c101 - c100) + y.f * (c111 - c110)));
+                        dy += v * (gz * (gx * (c010 - c000) + x.f * (c011 - c001)) +
+                                   z.f * (gx * (c110 - c100) + x.f * (c111 - c101)));
+                        dz += v * (gy * (gx * (c100 - c000) + x.f * (c101 - c001)) +
+                                   y.f * (gx * (c110 - c010) + x.f * (c111 - c011)));
+                    }
+                    vu[3 * i] = dx * sx * x.inside;
+                    vu[3 * i + 1] = dy * sy * y.inside;
+                    vu[3 * i + 2] = dz * sz * z.inside;
                 }
-                vu[3 * i] = dx * sx * x.inside;
-                vu[3 * i + 1] = dy * sy * y.inside;
-                vu[3 * i + 2] = dz * sz * z.inside;
             }
         }
     });
     torch::Tensor v_grid = torch::empty({0}, grid.options());
     if (need_grid) {
         v_grid = parts[0];
-        for (int t = 1; t < threads; ++t) v_grid.add_(parts[size_t(t)]);
+        for (int64_t s = 1; s < slices; ++s) v_grid.add_(parts[size_t(s)]);
     }
     return {v_grid, v_u};
 }
