@@ -28,7 +28,6 @@ import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-FIELD_METHODS = ("nerf", "edi-nerf", "e2nerf", "deblur-nerf")  # Table I's NeRF columns: the voxel-grid trainer
 
 
 def child(args: argparse.Namespace) -> None:
@@ -38,6 +37,7 @@ def child(args: argparse.Namespace) -> None:
     import yaml
 
     from eigs.artifacts.gaussians import GaussianCloud
+    from eigs.plan import is_field_method
     from eigs.train.config import TrainConfig
     from eigs.train.data import load_train_data
 
@@ -59,8 +59,9 @@ def child(args: argparse.Namespace) -> None:
         jitter = rng.normal(0, 1e-3, (n, 3)).astype(np.float32)
         data.init = GaussianCloud(c.means[idx] + jitter, c.f_dc[idx], c.f_rest[idx], c.opacity[idx],
                                   c.log_scales[idx], c.quats[idx])  # fmt: skip
+    field = is_field_method(spec["method"])
     opts = spec.get("options", {})
-    if spec["method"] in FIELD_METHODS:  # the voxel-grid field's trainer, with the run's options (its grid schedule)
+    if field:  # the voxel-grid field's trainer, with the run's options (its grid schedule)
         try:
             from eigs.train.field.trainer import FieldTrainer
         except ImportError:  # before the train package's split (issue 47)
@@ -79,7 +80,7 @@ def child(args: argparse.Namespace) -> None:
         t = time.perf_counter()
         tr.train_step()
         times.append((time.perf_counter() - t) * 1e3)
-    size = len(tr.model) if spec["method"] not in FIELD_METHODS else n
+    size = n if field else len(tr.model)
     print(json.dumps({"ms": statistics.median(times), "gaussians": size, "width": data.width,
                       "height": data.height}))  # fmt: skip
 

@@ -22,7 +22,6 @@ from eigs.util.extension import load_extension
 
 CSRC = Path(__file__).resolve().parent / "csrc"
 SOURCES = ("ssim.cpp",)
-WINDOW, SIGMA = 11, 1.5  # the 3DGS window, as ssim_torch's defaults
 
 
 def load() -> ModuleType:
@@ -62,7 +61,7 @@ def ssim_fused(x: Tensor, y: Tensor, reduction: str = "mean", data_range: float 
     if not (data_range > 0 and data_range < float("inf")):
         raise ValueError(f"data_range must be finite and > 0, got {data_range}")
     xp, yp, n, batched = as_planes(x, y)
-    window = gaussian_window(WINDOW, SIGMA, dtype=torch.float32)
+    window = gaussian_window()  # the 3DGS window (11 taps, σ 1.5), float32: the kernel's
     c1, c2 = (K1 * data_range) ** 2, (K2 * data_range) ** 2
     smap = _SSIMMap.apply(xp.contiguous(), yp.contiguous(), window, c1, c2)  # (N C, H, W)
     return reduce_ssim_map(smap, n, batched, reduction)

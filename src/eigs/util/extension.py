@@ -32,7 +32,7 @@ LDFLAGS = ("-fopenmp",)
 
 log = logging.getLogger(__name__)
 _lock = threading.Lock()
-_modules: dict[str, ModuleType] = {}
+_modules: dict[tuple[str, str, tuple[str, ...], tuple[str, ...]], ModuleType] = {}
 
 
 def source_hash(csrc: Path, names: Sequence[str]) -> str:
@@ -99,16 +99,19 @@ def load_extension(prefix: str, csrc: Path, sources: Sequence[str], headers: Seq
     """The compiled module of ``sources`` under ``csrc`` (built on first use, then cached in this process).
 
     ``prefix``: the module name's start (``eigs_render``); ``what``: the extension in words, for the error message.
+    The kernels call this on every use: once loaded, the module comes from a dictionary, without reading or hashing
+    the sources again (an edit made while a process runs takes effect in the next process).
     """
-    name = f"{prefix}_{source_hash(csrc, (*sources, *headers))}"
-    module = _modules.get(name)
+    key = (prefix, str(csrc), tuple(sources), tuple(headers))
+    module = _modules.get(key)
     if module is not None:
         return module
     with _lock:
-        if name in _modules:
-            return _modules[name]
+        if key in _modules:
+            return _modules[key]
         from torch.utils import cpp_extension
 
+        name = f"{prefix}_{source_hash(csrc, (*sources, *headers))}"
         ninja_on_path()
         build = cache_dir() / "torch_extensions" / name
         try:
@@ -128,5 +131,5 @@ def load_extension(prefix: str, csrc: Path, sources: Sequence[str], headers: Seq
                 )
         except (RuntimeError, OSError, ImportError) as exc:
             raise EigsError(csrc, f"building {what} failed: {compiler_error(str(exc))}") from exc
-        _modules[name] = module
+        _modules[key] = module
         return module
