@@ -5,7 +5,12 @@ from __future__ import annotations
 import pytest
 import torch
 
-from eigs.losses.consistency import fit_twist, motion_consistency_loss, rigid_displacement
+from eigs.losses.consistency import (
+    fit_twist,
+    motion_consistency_loss,
+    motion_consistency_loss_reference,
+    rigid_displacement,
+)
 
 F64 = torch.float64
 
@@ -122,3 +127,39 @@ def test_a_stack_of_fields_is_fitted_each_against_its_own_twist():
     assert one_by_one > 1e-4
     torch.testing.assert_close(motion_consistency_loss(x, noisy, delta=0.02), one_by_one, atol=0, rtol=1e-12)
     assert fit_twist(x[:0], noisy[:, :0])[0].shape == (4, 3)  # no Gaussians: zero twists, one per field
+
+
+@pytest.mark.parametrize("through", [True, False])
+@pytest.mark.parametrize("dtype", [torch.float32, F64])
+def test_the_fused_loss_equals_the_autograd_reference(through, dtype):
+    """motion_consistency_loss (one autograd Function, the gradient through the fit as the fit of the Huber term's
+    gradient) against motion_consistency_loss_reference (autograd through every op): the same loss and the same
+    gradient for a random cotangent, on K = 4 fields whose residuals fall on both sides of the Huber threshold."""
+    x, _, _, g = _field(2000, seed=11)
+    twists = [(torch.randn(3, generator=g, dtype=F64) * 0.02, torch.randn(3, generator=g, dtype=F64) * 0.1)
+              for _ in range(4)]  # fmt: skip
+    fields = torch.stack([rigid_displacement(x, w, v) for w, v in twists])
+    noise = torch.randn(fields.shape, generator=g, dtype=F64) * torch.rand(2000, 1, generator=g, dtype=F64) * 0.3
+    dx = (fields + noise).to(dtype)
+    xs = x.to(dtype)
+    cot = torch.randn((), generator=g, dtype=F64).to(dtype) + 2.0
+    got_dx, ref_dx = dx.clone().requires_grad_(True), dx.clone().requires_grad_(True)
+    got = motion_consistency_loss(xs, got_dx, reg=1e-4, delta=0.1, grad_through_fit=through)
+    ref = motion_consistency_loss_reference(xs, ref_dx, reg=1e-4, delta=0.1, grad_through_fit=through)
+    (got * cot).backward()
+    (ref * cot).backward()
+    assert (noise.abs() > 0.1).any() and (noise.abs() < 0.1).any()  # both branches of the Huber loss
+    tol = {"rtol": 1e-5, "atol": 1e-9} if dtype == torch.float32 else {"rtol": 1e-12, "atol": 1e-16}
+    torch.testing.assert_close(got, ref, **tol)
+    torch.testing.assert_close(got_dx.grad, ref_dx.grad, **tol)
+
+
+def test_the_fused_loss_takes_one_field_and_no_gaussians():
+    x, omega, nu, g = _field(50, seed=2)
+    dx = (rigid_displacement(x, omega, nu) + 0.05 * torch.randn(50, 3, generator=g, dtype=F64)).requires_grad_(True)
+    torch.testing.assert_close(motion_consistency_loss(x, dx), motion_consistency_loss_reference(x, dx), rtol=1e-12,
+                               atol=0)  # fmt: skip
+    empty = torch.zeros(0, 3, dtype=F64, requires_grad=True)
+    loss = motion_consistency_loss(x[:0], empty)
+    loss.backward()
+    assert loss.item() == 0.0 and empty.grad.shape == (0, 3)
