@@ -15,6 +15,7 @@ from torch import Tensor
 from eigs.artifacts.gaussians import GaussianCloud
 from eigs.render.gaussians import render_gaussians
 from eigs.train.config import TrainConfig
+from eigs.train.optim import adam
 from eigs.util.schedule import exp_decay
 
 PARAM_NAMES = ("means", "sh0", "shN", "log_scales", "quats", "opacities")
@@ -114,7 +115,7 @@ def scene_extent(camera_centres: np.ndarray) -> float:
 
 
 def make_optimizer(model: GaussianModel, cfg: TrainConfig, extent: float) -> torch.optim.Adam:
-    """Adam with one param group per parameter, named; eps 1e-15 as 3DGS."""
+    """Adam with one param group per parameter, named; eps 1e-15 as 3DGS. :func:`eigs.train.optim.adam` (fused)."""
     lrs = {
         "means": cfg.lr_means * extent,
         "sh0": cfg.lr_sh0,
@@ -124,7 +125,7 @@ def make_optimizer(model: GaussianModel, cfg: TrainConfig, extent: float) -> tor
         "opacities": cfg.lr_opacities,
     }
     groups = [{"params": [model.params[n]], "lr": lrs[n], "name": n} for n in PARAM_NAMES]
-    return torch.optim.Adam(groups, eps=1e-15, foreach=True)
+    return adam(groups, eps=1e-15)
 
 
 def means_lr(cfg: TrainConfig, extent: float, step: int) -> float:
