@@ -182,10 +182,8 @@ def motion_consistency_loss_reference(
     delta: float = DEFAULT_DELTA,
     grad_through_fit: bool = True,
 ) -> Tensor:
-    """Eq. 6: mean over Gaussians of the Huber loss (threshold ``delta``, summed over x, y, z) between ``dx``
-    (N, 3) and the displacement of the best-fitting twist; for a stack ``dx`` (K, N, 3) (the K moved latent times of
-    one view) the mean of the K fields' losses, each against its own fit, through autograd (the reference of
-    :func:`motion_consistency_loss`)."""
+    """:func:`motion_consistency_loss` (same arguments, same value) through autograd on every tensor op: the
+    reference its tests compare it with."""
     if x.shape[0] == 0:
         return dx.sum() * 0.0
     x = x.detach()
