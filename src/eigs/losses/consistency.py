@@ -176,11 +176,7 @@ def motion_consistency_loss(
 
 
 def motion_consistency_loss_reference(
-    x: Tensor,
-    dx: Tensor,
-    reg: float = DEFAULT_REG,
-    delta: float = DEFAULT_DELTA,
-    grad_through_fit: bool = True,
+    x: Tensor, dx: Tensor, reg: float = DEFAULT_REG, delta: float = DEFAULT_DELTA, grad_through_fit: bool = True
 ) -> Tensor:
     """:func:`motion_consistency_loss` (same arguments, same value) through autograd on every tensor op: the
     reference its tests compare it with."""
