@@ -25,13 +25,14 @@ DEFAULT_DELTA = 0.1  # Huber threshold δ of Eq. 6
 
 
 def _skew(v: Tensor) -> Tensor:
-    """(3,) → (3, 3) with skew(v) @ w = v × w."""
-    z = v.new_zeros(())
+    """(…, 3) → (…, 3, 3) with skew(v) @ w = v × w."""
+    x, y, z = v.unbind(-1)
+    o = torch.zeros_like(x)
     return torch.stack([
-        torch.stack([z, -v[2], v[1]]),
-        torch.stack([v[2], z, -v[0]]),
-        torch.stack([-v[1], v[0], z]),
-    ])  # fmt: skip
+        torch.stack([o, -z, y], dim=-1),
+        torch.stack([z, o, -x], dim=-1),
+        torch.stack([-y, x, o], dim=-1),
+    ], dim=-2)  # fmt: skip
 
 
 class _TwistSystem:
@@ -104,15 +105,8 @@ def fit_twist(x: Tensor, dx: Tensor, reg: float = DEFAULT_REG) -> tuple[Tensor, 
 def _rigid_columns(omega: Tensor, nu: Tensor) -> Tensor:
     """K twists (K, 3) each → (4, 3K): the rigid displacements of the points ``xa`` = [x, 1] (N, 4) are ``xa @ W``,
     field k in columns 3k..3k+2 (x·[ω]ₓ − ν = −ω × x − ν)."""
-    k = omega.shape[0]
-    z = torch.zeros_like(omega[:, 0])
-    skew = torch.stack([
-        torch.stack([z, -omega[:, 2], omega[:, 1]], dim=1),
-        torch.stack([omega[:, 2], z, -omega[:, 0]], dim=1),
-        torch.stack([-omega[:, 1], omega[:, 0], z], dim=1),
-        -nu,
-    ], dim=1)  # (K, 4, 3)  # fmt: skip
-    return skew.transpose(0, 1).reshape(4, 3 * k)
+    w = torch.cat([_skew(omega), -nu[:, None, :]], dim=1)  # (K, 4, 3): rows [ω]ₓ, then −ν
+    return w.transpose(0, 1).reshape(4, 3 * omega.shape[0])
 
 
 def rigid_displacement(x: Tensor, omega: Tensor, nu: Tensor) -> Tensor:
