@@ -154,7 +154,7 @@ def time_kernels(
     means, quats, scales, opac, colors, viewmat, K, W, H, bg = args
     m2, con, dep, ext, radii = C.project_fwd(means, quats, scales, opac, colors, camera_list(viewmat, K, means.dtype),
                                              W, H)
-    offs, ids = C.isect_tiles(m2, ext, dep, radii, W, H)
+    offs, ids = C.isect_tiles(m2, ext, dep, radii, W, H, con, opac)
     v_image, v_alpha = cotangents(args, 0)
     best_f = best_b = cpu_f = cpu_b = math.inf
     for r in range(repeats + 1):

@@ -57,9 +57,9 @@ def phases(results: Path, n: int, repeats: int) -> list[str]:
     w, h = data.width, data.height
     ext = _backend.load()
     m2, con, dep, extent, radii = ext.project_fwd(means, quats, scales, opac, colors, cam, w, h)
-    offs, ids = ext.isect_tiles(m2, extent, dep, radii, w, h)
+    offs, ids = ext.isect_tiles(m2, extent, dep, radii, w, h, con, opac)
     t_proj = median_ms(lambda: ext.project_fwd(means, quats, scales, opac, colors, cam, w, h), repeats)
-    t_bin = median_ms(lambda: ext.isect_tiles(m2, extent, dep, radii, w, h), repeats)
+    t_bin = median_ms(lambda: ext.isect_tiles(m2, extent, dep, radii, w, h, con, opac), repeats)
     t_comp = median_ms(lambda: ext.rasterize_fwd(m2, con, colors, opac, extent, bg, offs, ids, w, h, 0), repeats)
     share = (t_proj + t_bin) / (t_proj + t_bin + t_comp)
     return [f"{results.name}", f"{w}×{h}", f"{len(means):,}", f"{ids.numel():,}", f"{t_proj:.2f}", f"{t_bin:.2f}",

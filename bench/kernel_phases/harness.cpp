@@ -63,8 +63,8 @@ int main(int argc, char** argv) {
     const int64_t n_tiles = int64_t((W + 15) / 16) * ((H + 15) / 16);
     std::vector<int64_t> offs(n_tiles + 1);
     eigs::IsectPlan plan;
-    const int64_t ni = eigs::isect_plan<float>(n, m2.data(), ext.data(), dep.data(), radii.data(), W, H,
-                                               offs.data(), plan, 1);
+    const eigs::BinInputs<float> bin{n, m2.data(), ext.data(), con.data(), opac.data(), W, H};
+    const int64_t ni = eigs::isect_plan<float>(bin, dep.data(), radii.data(), offs.data(), plan, 1);
     std::vector<int64_t> ids(ni);
     eigs::isect_fill(plan, ids.data());
     std::vector<float> image(H * W * D), alpha(H * W), trans(H * W), vimg(H * W * D), valpha(H * W);

@@ -193,9 +193,9 @@ def test_double_backward_raises() -> None:
         g_means.sum().backward()
 
 
-def test_backward_rejects_binning_that_does_not_match() -> None:
-    # The backward groups pair slots by Gaussian from means2d/extents; a binning made from other extents must be
-    # refused with a clear error instead of writing out of bounds.
+def test_backward_rejects_a_binning_that_names_no_gaussian() -> None:
+    # The backward groups the pair slots by the Gaussian ids of the binning it is given; an id outside 0..N-1
+    # must be refused with a clear error instead of writing out of bounds.
     from eigs.render import _backend
     from eigs.render._wrapper import camera_list
 
@@ -204,13 +204,11 @@ def test_backward_rejects_binning_that_does_not_match() -> None:
     means, quats, scales, opac, colors, viewmat, K, W, H, bg = scene.args()
     cam = camera_list(viewmat, K, means.dtype)
     m2, con, dep, ext, radii = C.project_fwd(means, quats, scales, opac, colors, cam, W, H)
-    offs, ids = C.isect_tiles(m2, ext, dep, radii, W, H)
+    offs, ids = C.isect_tiles(m2, ext, dep, radii, W, H, con, opac)
     image, alpha, trans, last, work = C.rasterize_fwd(m2, con, colors, opac, ext, bg, offs, ids, W, H, 0)
     v_image, v_alpha = torch.ones_like(image), torch.ones_like(alpha)
-    with pytest.raises(RuntimeError, match="binning does not match"):
-        C.rasterize_bwd(m2, con, colors, opac, ext * 3, bg, offs, ids, W, H, trans, last, work, v_image, v_alpha, 0)
-    # the same number of pairs, but binned one tile to the right of where means2d puts them
-    shifted = m2 + torch.tensor([16.0, 0.0])
-    offs2, ids2 = C.isect_tiles(shifted, ext, dep, radii, W, H)
-    with pytest.raises(RuntimeError, match="binning does not match"):
-        C.rasterize_bwd(m2, con, colors, opac, ext, bg, offs2, ids2, W, H, trans, last, work, v_image, v_alpha, 0)
+    for bad in (50, -1):
+        wrong = ids.clone()
+        wrong[len(wrong) // 2] = bad
+        with pytest.raises(RuntimeError, match="not a Gaussian of 50"):
+            C.rasterize_bwd(m2, con, colors, opac, ext, bg, offs, wrong, W, H, trans, last, work, v_image, v_alpha, 0)

@@ -43,14 +43,17 @@ def project(
 
 
 def isect_tiles(
-    means2d: Tensor, extents: Tensor, depths: Tensor, radii: Tensor, width: int, height: int
+    means2d: Tensor, extents: Tensor, depths: Tensor, radii: Tensor, width: int, height: int,
+    conics: Tensor | None = None, opacities: Tensor | None = None,
 ) -> tuple[Tensor, Tensor]:
     """Tile binning (not differentiable).
 
     Returns tile_offsets (n_tiles + 1,) int64 into flatten_ids (n_isects,) int64: per tile in row-major tile
-    order, the ids of the Gaussians whose conservative box touches it, in ascending depth (ties by index).
+    order, the ids of the Gaussians whose conservative box touches it, in ascending depth (ties by index). With
+    ``conics`` (N,3) and ``opacities`` (N,), the tiles of a box that its ellipse cannot reach with alpha ≥ 1/255 are
+    left out (the tile culling of docs/rasterizer.md; the pipeline's own binning); the renders are the same.
     """
-    return _backend.load().isect_tiles(means2d, extents, depths, radii, width, height)
+    return _backend.load().isect_tiles(means2d, extents, depths, radii, width, height, conics, opacities)
 
 
 def rasterize_to_pixels(

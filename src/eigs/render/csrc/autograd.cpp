@@ -107,10 +107,12 @@ std::tuple<Tensor, Tensor, Tensor, Tensor, Tensor> project(const Tensor& means, 
     return {out[0], out[1], out[2], out[3], out[4]};
 }
 
-// Tile binning (not differentiable): see ops.h.
+// Tile binning (not differentiable): see ops.h.  conics and opacities: None bins every tile of each box.
 std::tuple<Tensor, Tensor> isect_tiles(const Tensor& means2d, const Tensor& extents, const Tensor& depths,
-                                       const Tensor& radii, int64_t width, int64_t height) {
-    return eigs::ops::isect_tiles(means2d.detach(), extents, depths, radii, width, height);
+                                       const Tensor& radii, int64_t width, int64_t height,
+                                       const std::optional<Tensor>& conics, const std::optional<Tensor>& opacities) {
+    return eigs::ops::isect_tiles(means2d.detach(), extents, depths, radii, width, height,
+                                  conics ? conics->detach() : Tensor(), opacities ? opacities->detach() : Tensor());
 }
 
 std::tuple<Tensor, Tensor> rasterize_to_pixels(const Tensor& means2d, const Tensor& conics, const Tensor& colors,
@@ -130,7 +132,7 @@ std::tuple<Tensor, Tensor, Tensor, Tensor, Tensor, Tensor, Tensor, Tensor> raste
     const std::vector<double>& cam, int64_t width, int64_t height, const Tensor& background, int64_t isa) {
     auto [means2d, conics, depths, extents, radii] =
         project(means, quats, scales, opacities, colors, cam, width, height);
-    auto [tile_offsets, flatten_ids] = isect_tiles(means2d, extents, depths, radii, width, height);
+    auto [tile_offsets, flatten_ids] = isect_tiles(means2d, extents, depths, radii, width, height, conics, opacities);
     auto [image, alpha] = rasterize_to_pixels(means2d, conics, colors, opacities, background, extents,
                                               tile_offsets, flatten_ids, width, height, isa);
     return {image, alpha, means2d, conics, depths, radii, tile_offsets, flatten_ids};
@@ -143,7 +145,9 @@ PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
               "rasterize) and the raw kernels (*_fwd, *_bwd)";
     using release = py::call_guard<py::gil_scoped_release>;
     m.def("project", &project, release());
-    m.def("isect_tiles", &isect_tiles, release());
+    m.def("isect_tiles", &isect_tiles, py::arg("means2d"), py::arg("extents"), py::arg("depths"), py::arg("radii"),
+          py::arg("width"), py::arg("height"), py::arg("conics") = py::none(), py::arg("opacities") = py::none(),
+          release());
     m.def("rasterize_to_pixels", &rasterize_to_pixels, release());
     m.def("rasterize", &rasterize, release());
     m.def("project_fwd", &eigs::ops::project_fwd, release());

@@ -6,6 +6,8 @@
 #include <memory>
 #include <vector>
 
+#include "tile_geom.h"
+
 namespace eigs {
 
 // Camera: world-to-camera rotation R (row-major 3x3), translation t, pinhole intrinsics, image size.
@@ -44,15 +46,25 @@ void project_backward(int64_t n, const S* means, const S* quats, const S* scales
 struct IsectPlan {
     std::unique_ptr<int64_t[]> order;  // visible Gaussians in (depth, index) order (n_visible entries)
     std::unique_ptr<int32_t[]> rect;   // per Gaussian: tile columns [0], [1], tile rows [2], [3] (inclusive)
+    std::unique_ptr<uint64_t[]> masks;  // when the binning culls (tile_geom.h): per Gaussian its tile_mask,
+    std::unique_ptr<EllipseRows[]> ellipses;  // or, for a rectangle of over 64 tiles, its ellipse_rows
     std::vector<int64_t> cursor;       // nchunks x n_tiles: where chunk c writes into tile t
     int nchunks = 1;
     int64_t n_visible = 0, n_tiles = 0, tiles_x = 0;
 };
 
+// What the binning reads of the N projected Gaussians: means2d (N,2), extents (N,2) and, for the tile culling
+// (tile_geom.h, tile_row_span), conics (N,3) and opacities (N); conics == nullptr bins every tile of each box.
 template <typename S>
-int64_t isect_plan(int64_t n, const S* means2d, const S* extents, const S* depths, const int32_t* radii,
-                   int64_t width, int64_t height, int64_t* tile_offsets /* (n_tiles + 1) */, IsectPlan& plan,
-                   int nthreads);
+struct BinInputs {
+    int64_t n;
+    const S *means2d, *extents, *conics, *opacities;
+    int64_t width, height;
+};
+
+template <typename S>
+int64_t isect_plan(const BinInputs<S>& b, const S* depths, const int32_t* radii,
+                   int64_t* tile_offsets /* (n_tiles + 1) */, IsectPlan& plan, int nthreads);
 
 void isect_fill(IsectPlan& plan, int64_t* flatten_ids);
 

@@ -105,24 +105,36 @@ std::tuple<Tensor, Tensor, Tensor> project_bwd(const Tensor& means, const Tensor
 }
 
 std::tuple<Tensor, Tensor> isect_tiles(const Tensor& means2d, const Tensor& extents, const Tensor& depths,
-                                       const Tensor& radii, int64_t width, int64_t height) {
+                                       const Tensor& radii, int64_t width, int64_t height, const Tensor& conics,
+                                       const Tensor& opacities) {
     const auto dt = means2d.scalar_type();
     check(means2d, "means2d", dt);
     check(extents, "extents", dt);
     check(depths, "depths", dt);
     check(radii, "radii", at::kInt);
     const int64_t n = means2d.size(0);
+    const bool cull = conics.defined();
+    TORCH_CHECK(cull == opacities.defined(), "isect_tiles: give conics and opacities together, or neither");
+    if (cull) {
+        check(conics, "conics", dt);
+        check(opacities, "opacities", dt);
+        TORCH_CHECK(conics.size(0) == n && opacities.size(0) == n, "isect_tiles: conics and opacities need ", n,
+                    " rows");
+    }
     const int64_t n_tiles = ((width + 15) / 16) * ((height + 15) / 16);
     Tensor offsets = at::empty({n_tiles + 1}, means2d.options().dtype(at::kLong));
     eigs::IsectPlan plan;
     int64_t total = 0;
+    Tensor ids;
     AT_DISPATCH_FLOATING_TYPES(dt, "isect_tiles", [&] {
-        total = eigs::isect_plan<scalar_t>(n, means2d.data_ptr<scalar_t>(), extents.data_ptr<scalar_t>(),
-                                           depths.data_ptr<scalar_t>(), radii.data_ptr<int32_t>(), width, height,
+        const eigs::BinInputs<scalar_t> b{n, means2d.data_ptr<scalar_t>(), extents.data_ptr<scalar_t>(),
+                                          cull ? conics.data_ptr<scalar_t>() : nullptr,
+                                          cull ? opacities.data_ptr<scalar_t>() : nullptr, width, height};
+        total = eigs::isect_plan<scalar_t>(b, depths.data_ptr<scalar_t>(), radii.data_ptr<int32_t>(),
                                            offsets.data_ptr<int64_t>(), plan, threads(n, kIsectGrain));
+        ids = at::empty({total}, means2d.options().dtype(at::kLong));
+        eigs::isect_fill(plan, ids.data_ptr<int64_t>());
     });
-    Tensor ids = at::empty({total}, means2d.options().dtype(at::kLong));
-    eigs::isect_fill(plan, ids.data_ptr<int64_t>());
     return {offsets, ids};
 }
 

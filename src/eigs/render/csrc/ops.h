@@ -27,9 +27,11 @@ std::tuple<Tensor, Tensor, Tensor> project_bwd(const Tensor& means, const Tensor
                                                const std::vector<double>& cam, int64_t width, int64_t height,
                                                const Tensor& radii, const Tensor& v_means2d, const Tensor& v_conics);
 
-// -> tile_offsets (n_tiles + 1) int64, flatten_ids (n_isects) int64
+// -> tile_offsets (n_tiles + 1) int64, flatten_ids (n_isects) int64.  With conics (N,3) and opacities (N) given,
+// a box's tiles that its ellipse cannot reach are left out (kernels.h, BinInputs); undefined tensors: every tile.
 std::tuple<Tensor, Tensor> isect_tiles(const Tensor& means2d, const Tensor& extents, const Tensor& depths,
-                                       const Tensor& radii, int64_t width, int64_t height);
+                                       const Tensor& radii, int64_t width, int64_t height, const Tensor& conics,
+                                       const Tensor& opacities);
 
 // -> image (H,W,D), alpha (H,W), trans (H,W) final transmittance, last (H,W) int32, tile_work (n_tiles) int64
 std::tuple<Tensor, Tensor, Tensor, Tensor, Tensor> rasterize_fwd(const Tensor& means2d, const Tensor& conics,

@@ -368,9 +368,32 @@ int64_t co_rank(int64_t p, const K* a, int64_t na, const K* b, int64_t nb) {
 
 }  // namespace
 
+// Calls f(tile) for every tile Gaussian g is binned to, in row-major tile order: the tiles of its rectangle and,
+// when the plan culls, only those that tile_mask or tile_row_span keep (tile_geom.h).
+template <typename F>
+inline void for_each_tile(const IsectPlan& plan, int64_t g, F&& f) {
+    const int32_t* r = plan.rect.get() + 4 * g;
+    const TileCull kind = plan.masks ? tile_cull_kind(r) : TileCull::kNone;
+    if (kind == TileCull::kMask && plan.masks[g] != kAllTiles) {
+        const int64_t nx = r[1] - r[0] + 1;
+        for (uint64_t bits = plan.masks[g]; bits != 0; bits &= bits - 1) {
+            const int64_t k = __builtin_ctzll(bits);
+            f((r[2] + k / nx) * plan.tiles_x + r[0] + k % nx);
+        }
+        return;
+    }
+    for (int64_t ty = r[2]; ty <= r[3]; ++ty) {
+        int32_t c0 = r[0], c1 = r[1];
+        if (kind == TileCull::kRows && !tile_row_span(plan.ellipses[g], r, ty, c0, c1)) continue;
+        for (int64_t tx = c0; tx <= c1; ++tx) f(ty * plan.tiles_x + tx);
+    }
+}
+
 template <typename S>
-int64_t isect_plan(int64_t n, const S* means2d, const S* extents, const S* depths, const int32_t* radii,
-                   int64_t width, int64_t height, int64_t* tile_offsets, IsectPlan& plan, int nthreads) {
+int64_t isect_plan(const BinInputs<S>& b, const S* depths, const int32_t* radii, int64_t* tile_offsets,
+                   IsectPlan& plan, int nthreads) {
+    const int64_t n = b.n, width = b.width, height = b.height;
+    const S *means2d = b.means2d, *extents = b.extents;
     using Key = DepthKey<S>;
     const int64_t tiles_x = (width + kTile - 1) / kTile, tiles_y = (height + kTile - 1) / kTile;
     const int64_t n_tiles = tiles_x * tiles_y;
@@ -380,6 +403,12 @@ int64_t isect_plan(int64_t n, const S* means2d, const S* extents, const S* depth
     plan.tiles_x = tiles_x;
     plan.nchunks = k;
     plan.rect.reset(new int32_t[4 * n1]);
+    if (b.conics != nullptr) {  // tile culling: a mask per Gaussian, the ellipse's rows for the large rectangles
+        plan.masks.reset(new uint64_t[n1]);
+        plan.ellipses.reset(new EllipseRows[n1]);
+    }
+    uint64_t* masks = plan.masks.get();
+    EllipseRows* ellipses = plan.ellipses.get();
     plan.order.reset(new int64_t[n1]);
     std::vector<int64_t> kept(size_t(k) + 1, 0);
     std::unique_ptr<Key[]> keys_buf(new Key[n1]), tmp_buf(new Key[n1]);
@@ -402,6 +431,15 @@ int64_t isect_plan(int64_t n, const S* means2d, const S* extents, const S* depth
                 r[0] = r[2] = 1;
                 r[1] = r[3] = 0;
                 if (radii[2 * g] <= 0 || !tile_rect(means2d + 2 * g, extents + 2 * g, width, height, r)) continue;
+                const TileCull kind = masks ? tile_cull_kind(r) : TileCull::kNone;
+                if (kind != TileCull::kNone) {
+                    const EllipseRows e = ellipse_rows(means2d + 2 * g, extents + 2 * g, b.conics + 3 * g,
+                                                       b.opacities[g], width, height);
+                    if (kind == TileCull::kMask)
+                        masks[g] = tile_mask(e, r);
+                    else
+                        ellipses[g] = e;
+                }
                 keys[lo + m] = Key{depths[g], g};
                 ++m;
             }
@@ -454,9 +492,7 @@ int64_t isect_plan(int64_t n, const S* means2d, const S* extents, const S* depth
             for (int64_t i = chunk_lo(m, k, c); i < chunk_lo(m, k, c + 1); ++i) {
                 const int64_t g = keys[i].g;
                 order[i] = g;
-                const int32_t* r = rect + 4 * g;
-                for (int64_t ty = r[2]; ty <= r[3]; ++ty)
-                    for (int64_t tx = r[0]; tx <= r[1]; ++tx) ++cc[ty * tiles_x + tx];
+                for_each_tile(plan, g, [cc](int64_t t) { ++cc[t]; });
             }
         }
     }
@@ -478,16 +514,13 @@ int64_t isect_plan(int64_t n, const S* means2d, const S* extents, const S* depth
 
 void isect_fill(IsectPlan& plan, int64_t* flatten_ids) {
     const int k = plan.nchunks;
-    const int64_t m = plan.n_visible, n_tiles = plan.n_tiles, tiles_x = plan.tiles_x;
-    const int32_t* rect = plan.rect.get();
+    const int64_t m = plan.n_visible, n_tiles = plan.n_tiles;
 #pragma omp parallel for num_threads(k) schedule(static, 1)
     for (int c = 0; c < k; ++c) {
         int64_t* cur = plan.cursor.data() + size_t(c) * size_t(n_tiles);
         for (int64_t i = chunk_lo(m, k, c); i < chunk_lo(m, k, c + 1); ++i) {
             const int64_t g = plan.order[i];
-            const int32_t* r = rect + 4 * g;
-            for (int64_t ty = r[2]; ty <= r[3]; ++ty)
-                for (int64_t tx = r[0]; tx <= r[1]; ++tx) flatten_ids[cur[ty * tiles_x + tx]++] = g;
+            for_each_tile(plan, g, [&](int64_t t) { flatten_ids[cur[t]++] = g; });
         }
     }
 }
@@ -497,8 +530,7 @@ void isect_fill(IsectPlan& plan, int64_t* flatten_ids) {
                                      const Camera<S>&, S*, S*, S*, S*, int32_t*, int);                        \
     template void project_backward<S>(int64_t, const S*, const S*, const S*, const Camera<S>&, const int32_t*, \
                                       const S*, const S*, S*, S*, S*, int);                                   \
-    template int64_t isect_plan<S>(int64_t, const S*, const S*, const S*, const int32_t*, int64_t, int64_t,  \
-                                   int64_t*, IsectPlan&, int);
+    template int64_t isect_plan<S>(const BinInputs<S>&, const S*, const int32_t*, int64_t*, IsectPlan&, int);
 
 EIGS_INSTANTIATE_PROJ(float)
 EIGS_INSTANTIATE_PROJ(double)

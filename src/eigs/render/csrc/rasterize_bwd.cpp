@@ -2,11 +2,11 @@
 // (bwd_tile).  Rebuilds the transmittance in front of each Gaussian with T <- T / max(1e-6, 1 - alpha), starting
 // from the forward's final T, and one scalar per pixel for everything behind it (colour, background, alpha
 // output).  Per-lane accumulators are reduced once per (tile, Gaussian) into that pair's slot.  The slots are
-// grouped by Gaussian (each Gaussian's tiles in row-major order, which is its isect order), so the final
+// grouped by Gaussian (each Gaussian's pairs in isect order, which is row-major tile order), so the final
 // per-Gaussian sums run in parallel over Gaussians, each over a contiguous range in a fixed order: the result does
-// not depend on the thread count or schedule (no atomics), nor on the ISA variant.
+// not depend on the thread count or schedule (no atomics), nor on the ISA variant.  The slots come from the
+// binning itself (a counting sort of flatten_ids), so any binning works, the tile culling's included.
 #include <algorithm>
-#include <atomic>
 #include <cstdint>
 #include <memory>
 #include <stdexcept>
@@ -30,11 +30,8 @@ struct BwdCtx {
     const S* trans;
     const int32_t* last;
     const S *v_image, *v_alpha;
-    const int32_t* rect;   // (N, 4) tile rectangle of each Gaussian (as binned)
-    const int64_t* slot0;  // (N + 1) first pair slot of each Gaussian
-    std::atomic<bool>* mismatch;  // set when a Gaussian is binned to a tile outside its rectangle
+    const int64_t* slot;      // (n_isects) pair i's slot in pair_grads (slots grouped by Gaussian)
     S *pair_grads, *tile_bg;  // tile_bg (n_tiles, D): per tile, sum over its pixels of T_final v_image
-    int64_t n_isects;         // pair slots in pair_grads
 };
 
 template <typename S>
@@ -111,38 +108,27 @@ void rasterize_backward(int64_t n, const S* means2d, const S* conics, const S* c
     const int64_t n_tiles = ((width + kTile - 1) / kTile) * ((height + kTile - 1) / kTile);
     const int64_t n_isects = tile_offsets[n_tiles];
     const int64_t P = 6 + d;
-    // Pair slots grouped by Gaussian: slot0[g] = sum of the tile counts of the Gaussians before g.
+    // Pair slots grouped by Gaussian, each Gaussian's pairs in isect order: a counting sort of flatten_ids.
+    // slot0[g] = the pairs of the Gaussians before g; slot[i] = slot0[g] + (g's pairs before pair i).
     const size_t n1 = size_t(std::max<int64_t>(n, 1));
-    std::unique_ptr<int32_t[]> rect(new int32_t[4 * n1]);
-    std::unique_ptr<int64_t[]> slot0(new int64_t[n1 + 1]);
-    std::vector<int64_t> chunk(size_t(nthreads) + 1, 0);
-#pragma omp parallel num_threads(nthreads)
-    {
-        const int nt = omp_get_num_threads(), tid = omp_get_thread_num();
-        const int64_t lo = n * tid / nt, hi = n * (tid + 1) / nt;
-        int64_t run = 0;
-        for (int64_t g = lo; g < hi; ++g) {
-            int32_t* r = rect.get() + 4 * g;
-            slot0[g] = run;
-            if (tile_rect(means2d + 2 * g, extents + 2 * g, width, height, r))
-                run += int64_t(r[1] - r[0] + 1) * int64_t(r[3] - r[2] + 1);
-        }
-        chunk[size_t(tid) + 1] = run;
-#pragma omp barrier
-        int64_t base = 0;
-        for (int c = 0; c < tid; ++c) base += chunk[size_t(c) + 1];
-        for (int64_t g = lo; g < hi; ++g) slot0[g] += base;
-        if (tid == nt - 1) slot0[n] = base + run;
+    std::unique_ptr<int64_t[]> slot0(new int64_t[n1 + 1]());
+    std::unique_ptr<int64_t[]> slot(new int64_t[size_t(std::max<int64_t>(n_isects, 1))]);
+    for (int64_t i = 0; i < n_isects; ++i) {
+        const int64_t g = flatten_ids[i];
+        if (g < 0 || g >= n)
+            throw std::runtime_error("rasterize_backward: flatten_ids holds " + std::to_string(g) +
+                                     ", not a Gaussian of " + std::to_string(n));
+        ++slot0[g + 1];
     }
-    if (slot0[n] != n_isects)
-        throw std::runtime_error("rasterize_backward: the tile binning does not match means2d/extents (" +
-                                 std::to_string(slot0[n]) + " vs " + std::to_string(n_isects) + " pairs)");
+    for (int64_t g = 0; g < n; ++g) slot0[g + 1] += slot0[g];
+    {
+        std::vector<int64_t> cur(slot0.get(), slot0.get() + n);
+        for (int64_t i = 0; i < n_isects; ++i) slot[i] = cur[size_t(flatten_ids[i])]++;
+    }
     std::vector<S> tile_bg(size_t(n_tiles * d));
-    std::atomic<bool> mismatch{false};
-    const BwdCtx<S> A{means2d,      conics,      colors, opacities, extents, background, d,
-                      width,        height,      tile_offsets, flatten_ids, trans, last, v_image,
-                      v_alpha,      rect.get(),  slot0.get(), &mismatch, pair_grads, tile_bg.data(),
-                      n_isects};
+    const BwdCtx<S> A{means2d, conics,      colors, opacities, extents, background, d,          width,
+                      height,  tile_offsets, flatten_ids, trans, last, v_image, v_alpha, slot.get(),
+                      pair_grads, tile_bg.data()};
     const BwdFn<S> fn = pick_bwd(means2d, d, resolve_isa(isa));
     // Costliest tiles first, by the work the forward counted there (a far better estimate than list lengths).
     const std::vector<int64_t> order =
@@ -181,9 +167,6 @@ void rasterize_backward(int64_t n, const S* means2d, const S* conics, const S* c
             }
         }
     }
-    if (mismatch.load())
-        throw std::runtime_error("rasterize_backward: the tile binning does not match means2d/extents (a "
-                                 "Gaussian binned to a tile outside its box)");
     for (int64_t ch = 0; ch < d; ++ch) v_background[ch] = S(0);
     for (int64_t t = 0; t < n_tiles; ++t)
         for (int64_t ch = 0; ch < d; ++ch) v_background[ch] += tile_bg[size_t(t * d + ch)];
