@@ -38,7 +38,8 @@ void project_backward(int64_t n, const S* means, const S* quats, const S* scales
 
 // Tile binning, in two steps so that the caller can allocate flatten_ids in between.
 // isect_plan: for the Gaussians with radii > 0, the order (ascending depth, ties by index), their tile
-// rectangles and the pair counts; writes tile_offsets (n_tiles + 1, exclusive prefix sum) and returns n_isects.
+// rectangles (with BinInputs::conics, the tiles their ellipse reaches: tile_geom.h) and the pair counts; writes
+// tile_offsets (n_tiles + 1, exclusive prefix sum) and returns n_isects.
 // isect_fill: flatten_ids (n_isects): per tile (row-major tile order), the Gaussian ids in that order.
 // Parallel over nthreads chunks (sort per chunk + pairwise merges, each merge split among the threads at
 // co-ranks; per-chunk tile cursors): the result is the same for any thread count.
@@ -84,7 +85,8 @@ void rasterize_forward(const S* means2d, const S* conics, const S* colors, const
 // row-major order, i.e. its isect order), then summed per Gaussian in that fixed order (deterministic for any
 // thread count) into v_means2d (N,2), v_conics (N,3), v_opacities (N), v_colors (N,D) (overwritten);
 // v_background (D) = sum over pixels of T_final v_image, summed per tile (row-major pixels) and then over tiles
-// in tile order (deterministic too).  Throws std::runtime_error if the binning does not match means2d/extents.
+// in tile order (deterministic too).  The grouping is a counting sort of flatten_ids, so any binning of the
+// forward's works (the tile culling's too).  Throws std::runtime_error if flatten_ids names no Gaussian of 0..n-1.
 template <typename S>
 void rasterize_backward(int64_t n, const S* means2d, const S* conics, const S* colors, const S* opacities,
                         const S* extents, const S* background, int64_t d, int64_t width, int64_t height,
