@@ -38,6 +38,19 @@ def median_ms(fn, repeats: int) -> float:  # noqa: ANN001
     return statistics.median(times) * 1e3
 
 
+def one_binning(C, proj, colors, opac, bg, w: int, h: int, extra: tuple, v_image, v_alpha,  # noqa: ANN001
+                repeats: int) -> dict[str, float]:  # fmt: skip
+    """Pairs and bin / forward / backward ms of one view with one binning (``extra``: () or (conics, opacities))."""
+    m2, con, dep, ext, radii = proj
+    t_bin = median_ms(lambda: C.isect_tiles(m2, ext, dep, radii, w, h, *extra), repeats)
+    offs, ids = C.isect_tiles(m2, ext, dep, radii, w, h, *extra)
+    _, _, trans, last, work = C.rasterize_fwd(m2, con, colors, opac, ext, bg, offs, ids, w, h, 0)
+    t_fwd = median_ms(lambda: C.rasterize_fwd(m2, con, colors, opac, ext, bg, offs, ids, w, h, 0), repeats)
+    t_bwd = median_ms(lambda: C.rasterize_bwd(m2, con, colors, opac, ext, bg, offs, ids, w, h, trans, last, work,
+                                              v_image, v_alpha, 0), repeats)  # fmt: skip
+    return {"pairs": float(ids.numel()), "bin": t_bin, "fwd": t_fwd, "bwd": t_bwd}
+
+
 def compare(results: Path, n: int, repeats: int) -> dict[str, float]:
     """Mean over the views of pairs and bin / forward / backward ms, per binning ("whole", "culled")."""
     b = results / "b4"
@@ -62,16 +75,9 @@ def compare(results: Path, n: int, repeats: int) -> dict[str, float]:
         v_alpha = torch.randn(h, w, generator=g)
         for _ in range(2):  # interleaved twice
             for kind, extra in (("whole", ()), ("culled", (con, opac))):
-                t_bin = median_ms(lambda extra=extra: C.isect_tiles(m2, ext, dep, radii, w, h, *extra), repeats)
-                offs, ids = C.isect_tiles(m2, ext, dep, radii, w, h, *extra)
-                fwd = C.rasterize_fwd(m2, con, colors, opac, ext, bg, offs, ids, w, h, 0)
-                t_fwd = median_ms(lambda offs=offs, ids=ids: C.rasterize_fwd(m2, con, colors, opac, ext, bg, offs, ids,
-                                                                             w, h, 0), repeats)  # fmt: skip
-                trans, last, work = fwd[2], fwd[3], fwd[4]
-                t_bwd = median_ms(lambda offs=offs, ids=ids, trans=trans, last=last, work=work: C.rasterize_bwd(
-                    m2, con, colors, opac, ext, bg, offs, ids, w, h, trans, last, work, v_image, v_alpha, 0),
-                    repeats)  # fmt: skip
-                for m, x in (("pairs", ids.numel()), ("bin", t_bin), ("fwd", t_fwd), ("bwd", t_bwd)):
+                got = one_binning(C, (m2, con, dep, ext, radii), colors, opac, bg, w, h, extra, v_image, v_alpha,
+                                  repeats)  # fmt: skip
+                for m, x in got.items():
                     sums[f"{kind} {m}"] += x
     k = 2 * len(views)
     return {key: x / k for key, x in sums.items()} | {"width": w, "height": h, "gaussians": len(means)}

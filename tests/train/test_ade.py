@@ -161,3 +161,18 @@ def test_bfloat16_edge_sizes(n):
     assert all(t.dtype == torch.float32 and bool(torch.isfinite(t).all()) for t in g.values())
     if n:
         assert (out - ref).abs().max() <= 2e-2 * ref.abs().max()
+
+
+@pytest.mark.skipif(not ade_module.linear_relu_is_fused(torch.device("cpu")),
+                    reason="needs a CPU with native bfloat16 products (AMX or AVX512-BF16) for oneDNN's fused linear")
+@pytest.mark.parametrize("n", [1, 5000])
+def test_bfloat16_fused_linear_relu_equals_addmm_then_relu(monkeypatch, n):
+    """oneDNN's linear with bias and ReLU fused gives the same output and gradients as addmm + relu_, bit for bit."""
+    net, x, pose, v = make(3, 256, n, torch.float32)
+    net.matmul_dtype = torch.bfloat16
+    fused = grads(net, x, pose, v, fused=True)
+    monkeypatch.setattr(ade_module, "linear_relu_is_fused", lambda device: False)
+    plain = grads(net, x, pose, v, fused=True)
+    assert torch.equal(fused[0], plain[0])
+    for name in plain[1]:
+        assert torch.equal(fused[1][name], plain[1][name]), name
