@@ -14,28 +14,17 @@ Run (a quiet machine): ``.venv/bin/python bench/tile_culling.py --case results/d
 from __future__ import annotations
 
 import argparse
-import statistics
 import sys
-import time
 from pathlib import Path
 
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench._report import add_out_argument, table, write_section  # noqa: E402
+from bench.render_phases import median_ms  # noqa: E402
 from bench.train import resized_cloud  # noqa: E402
 from eigs.render import _backend, _wrapper  # noqa: E402
 from eigs.train.data import load_train_data  # noqa: E402
-
-
-def median_ms(fn, repeats: int) -> float:  # noqa: ANN001
-    fn()
-    times = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return statistics.median(times) * 1e3
 
 
 def one_binning(C, proj, colors, opac, bg, w: int, h: int, extra: tuple, v_image, v_alpha,  # noqa: ANN001
