@@ -14,7 +14,7 @@ from eigs.losses import photometric_loss
 from eigs.losses.consistency import motion_consistency_loss
 from eigs.losses.events import event_integration_loss, log_intensity
 from eigs.render.gaussians import render_gaussians
-from eigs.render.rigid import quat_multiply, rotmat_to_quat, transform_gaussians
+from eigs.render.rigid import quat_left_matrix, quat_multiply, rotmat_to_quat, transform_gaussians
 from eigs.train.config import TrainConfig
 from eigs.train.data import load_train_data
 from eigs.train.gaussian.strategy import quat_to_rotmat
@@ -373,3 +373,11 @@ def test_eigs_plus_steps_on_cuda(data):
     out = tr.method.step(tr.model, moving[0], 0, 0)
     out.loss.backward()
     assert torch.isfinite(out.loss) and out.loss.device.type == "cuda"
+
+
+def test_quat_left_matrix_is_the_hamilton_product() -> None:
+    """L(a) b equals a ⊗ b (transform_gaussians rotates through L), float64, batched."""
+    g = torch.Generator().manual_seed(3)
+    a, b = torch.randn(2, 50, 4, generator=g, dtype=torch.float64)
+    got = (quat_left_matrix(a) @ b.unsqueeze(-1)).squeeze(-1)
+    torch.testing.assert_close(got, quat_multiply(a, b), rtol=1e-14, atol=1e-14)

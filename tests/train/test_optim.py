@@ -53,3 +53,25 @@ def test_not_fused_without_parameters_it_can_fuse():
     assert opt.defaults["fused"] is True  # float64 on the CPU fuses too
     opt = adam([torch.zeros(3, dtype=torch.complex64, requires_grad=True)], lr=0.1)
     assert not opt.defaults["fused"] and opt.defaults["foreach"] is True
+
+
+def test_finite_grads_finds_every_non_finite_entry() -> None:
+    """One NaN, +inf or -inf anywhere in any gradient makes the check fail; finite gradients (huge ones included),
+    parameters without a gradient and empty gradients pass."""
+    from eigs.train.loop import finite_grads
+
+    g = torch.Generator().manual_seed(0)
+    params = [torch.zeros(s, requires_grad=True) for s in [(1000, 3), (7,), (256, 256), (0, 3), (5, 1, 3)]]
+    for p in params:
+        p.grad = torch.randn(p.shape, generator=g) * 1e30
+    params.append(torch.zeros(3, requires_grad=True))  # no gradient
+    assert finite_grads(params)
+    for i in (0, 1, 2, 4):
+        for bad in (float("nan"), float("inf"), -float("inf")):
+            flat = params[i].grad.view(-1)
+            k = int(torch.randint(flat.numel(), (1,), generator=g))
+            keep = float(flat[k])
+            flat[k] = bad
+            assert not finite_grads(params), (i, bad)
+            flat[k] = keep
+    assert finite_grads(params) and finite_grads([])

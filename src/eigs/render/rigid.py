@@ -97,18 +97,29 @@ def quat_multiply(a: Tensor, b: Tensor) -> Tensor:
     ], -1)  # fmt: skip
 
 
+def quat_left_matrix(a: Tensor) -> Tensor:
+    """(…, 4) quaternions w x y z → (…, 4, 4) matrices L(a) with L(a) b = a ⊗ b (:func:`quat_multiply`)."""
+    aw, ax, ay, az = a.unbind(-1)
+    return torch.stack([
+        torch.stack([aw, -ax, -ay, -az], -1),
+        torch.stack([ax, aw, -az, ay], -1),
+        torch.stack([ay, az, aw, -ax], -1),
+        torch.stack([az, -ay, ax, aw], -1),
+    ], -2)  # fmt: skip
+
+
 def transform_gaussians(means: Tensor, quats: Tensor, t: Tensor) -> tuple[Tensor, Tensor]:
     """Apply the rigid (4, 4) transform ``t`` to Gaussians: centres (N, 3) ↦ R x + p, rotations (N, 4) ↦ q_R ⊗ q
     (the quaternions keep their norm). With a stack ``t`` (K, 4, 4): every transform at once, (K, N, 3) centres and
-    (K, N, 4) rotations."""
+    (K, N, 4) rotations. The rotations as one product with L(q_R)ᵀ (:func:`quat_left_matrix`): one kernel and one
+    in the backward instead of some thirty element-wise ones over (K, N)."""
     r = t[..., :3, :3].to(means.dtype)
     p = t[..., :3, 3].to(means.dtype)
-    qr = rotmat_to_quat(r)
+    lt = quat_left_matrix(rotmat_to_quat(r)).transpose(-1, -2)  # (…, 4, 4)
     if t.dim() == 3:
         moved = torch.matmul(means, r.transpose(1, 2)) + p[:, None, :]  # (K, N, 3)
-        return moved, quat_multiply(qr[:, None, :].expand(-1, quats.shape[0], 4), quats.expand(t.shape[0], -1, 4))
-    moved = means @ r.T + p
-    return moved, quat_multiply(qr.expand_as(quats), quats)
+        return moved, torch.matmul(quats, lt)  # (K, N, 4)
+    return means @ r.T + p, quats @ lt
 
 
 def se3_adjoint(t: Tensor) -> Tensor:

@@ -59,11 +59,13 @@ class RunResult:
 
 
 def finite_grads(params: list[torch.Tensor]) -> bool:
-    """Whether every gradient of ``params`` is finite (parameters without one count as finite)."""
-    grads = [p.grad for p in params if p.grad is not None]
+    """Whether every gradient of ``params`` is finite (parameters without one count as finite): each gradient's
+    largest magnitude (one fused ``_foreach_norm`` over all of them) is finite exactly when all its entries are, as a
+    NaN or an infinity makes it NaN or infinite."""
+    grads = [p.grad for p in params if p.grad is not None and p.grad.numel() > 0]
     if not grads:
         return True
-    return bool(torch.stack([torch.isfinite(g).all() for g in grads]).all())
+    return bool(torch.stack(torch._foreach_norm(grads, float("inf"))).isfinite().all())
 
 
 # train_log.csv's held-out columns, written every ``eval_every`` steps (after the trainer's own fixed columns)
