@@ -19,6 +19,8 @@ Run (docs/development.md, "Measuring the default suite across sessions"):
 ``.venv/bin/snakemake --cores 2 $(.venv/bin/python bench/suite_ledger.py missing)``, then
 ``.venv/bin/python bench/suite_ledger.py save --directory .``, commit the ledger;
 ``.venv/bin/python bench/suite_ledger.py missing --count``; ``.venv/bin/python bench/suite_ledger.py tables``.
+Jobs retrained into a second ledger of the same config while the first held stale ones move over with ``merge
+--source LEDGER2`` (then ``prune`` what is still stale).
 """
 
 from __future__ import annotations
@@ -219,6 +221,40 @@ def prune(cfg: dict, ledger: Path) -> list[str]:
         lines.append(f"{jid}: removed ({change})")
     if stale:
         write_jobs_csv(ledger, [r for r in read_jobs_csv(ledger) if r.get("job") not in stale])
+    return lines
+
+
+def merge(cfg: dict, source: Path, ledger: Path) -> list[str]:
+    """Move every job of ledger ``source`` (of the same config: runs retrained while ``ledger`` still held stale
+    ones) into ``ledger``, in place of the job of the same id there: its folder, its benchmark file and its jobs.csv
+    row, the provenance as ``source`` recorded it. Jobs of ``ledger`` that ``source`` lacks stay as they are; stale
+    ones are then still stale (`prune` removes them). Refuses a ``source`` with stale or half-present jobs before it
+    writes anything. Returns a line per job moved."""
+    source, ledger = Path(source), Path(ledger)
+    stale = stale_jobs(cfg, source)
+    if stale:
+        first = next(iter(stale))
+        raise LedgerError(f"{source}: {len(stale)} jobs were run with other options than the config ({first}: "
+                          f"{stale[first]})")  # fmt: skip
+    jobs = {j.id: j for j in suite_jobs(cfg)}
+    moves = []
+    for row in read_jobs_csv(source):
+        job = jobs.get(row.get("job", ""))
+        if job is None:
+            raise LedgerError(f"{source / JOBS_CSV}: {row.get('job')!r} is not a job of the config")
+        if not in_ledger(source, job):
+            raise LedgerError(f"{source}: {job.id} has a provenance row but not its files ({job.benchmark})")
+        moves.append((job, row))
+    rows = read_jobs_csv(ledger)
+    lines = []
+    for job, row in moves:
+        if job.folder:
+            shutil.rmtree(ledger / job.folder, ignore_errors=True)
+            shutil.copytree(source / job.folder, ledger / job.folder)
+        rows = [r for r in rows if r.get("job") != job.id] + [row]
+        write_jobs_csv(ledger, rows)
+        _copy(source / job.benchmark, ledger / job.benchmark)
+        lines.append(f"{job.id}: moved ({row.get('commit', '')}, {row.get('date', '')})")
     return lines
 
 
@@ -467,10 +503,13 @@ def main(argv: list[str] | None = None) -> int:
     common(p)
     p = sub.add_parser("prune", help="remove the jobs run with other options than the config (a budget changed)")
     common(p)
+    p = sub.add_parser("merge", help="move the jobs of another ledger of the config into this one (replacing)")
+    common(p)
+    p.add_argument("--source", type=Path, required=True, help="the ledger whose jobs move (e.g. docs/suite_next)")
     args = ap.parse_args(argv)
     try:
         cfg = load_config(args.config)
-        if args.command != "prune":
+        if args.command not in ("prune", "merge"):
             check_current(cfg, args.ledger)
         if args.command == "save":
             saved, skipped = save(args.directory, cfg, args.ledger, commit=args.commit, replace_present=args.replace,
@@ -497,6 +536,11 @@ def main(argv: list[str] | None = None) -> int:
             for line in lines:
                 print(line)
             print(f"{args.ledger}: removed {len(lines)} jobs")
+        elif args.command == "merge":
+            lines = merge(cfg, args.source, args.ledger)
+            for line in lines:
+                print(line)
+            print(f"{args.ledger}: moved {len(lines)} jobs from {args.source}")
         else:
             for line in tables(cfg, args.ledger):
                 print(line)

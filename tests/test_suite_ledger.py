@@ -485,3 +485,47 @@ def test_a_device_batch_directory_names_the_machine_it_ran_on(tmp_path):
     (tmp_path / "batch.json").write_text('{"cpu": "x"}')
     with pytest.raises(LedgerError, match="batch.json"):
         batch_machine(tmp_path)
+
+
+def test_merge_moves_a_second_ledgers_jobs_with_their_provenance(workflow, tmp_path, capsys):
+    cfg, d = workflow
+    ledger, retrained = tmp_path / "ledger", tmp_path / "retrained"
+    assert ledger_main("save", "--directory", d, "--config", cfg, "--ledger", ledger, "--commit", "old",
+                       capsys=capsys)[0] == 0  # fmt: skip
+    # the 3dgs budget changes: the ledger's 3dgs jobs are stale; beta's is retrained into a second ledger
+    changed = yaml.safe_load(cfg.read_text())
+    changed["runs"]["3dgs"]["options"]["steps"] = 30
+    cfg.write_text(yaml.safe_dump(changed))
+    for rel in ("results/beta/b4/3dgs/config.json", "results/beta/b4/eval/3dgs/metrics.json"):
+        doc = json.loads((d / rel).read_text())
+        if "train" in doc:
+            doc["train"]["steps"] = 30
+        else:
+            doc["steps"] = 30
+        (d / rel).write_text(json.dumps(doc))
+    benchmark(d / "benchmarks/train/beta_b4_3dgs.tsv", 777.0, 700.0)
+    code, out, err = ledger_main("save", "--directory", d, "--config", cfg, "--ledger", retrained, "--commit", "new",
+                                 "--only", "*:beta:3dgs", capsys=capsys)  # fmt: skip
+    assert code == 0, err
+    before = files_under(ledger)
+    code, out, err = ledger_main("merge", "--source", retrained, "--config", cfg, "--ledger", ledger, capsys=capsys)
+    assert code == 0, err
+    assert out.splitlines()[-1] == f"{ledger}: moved 2 jobs from {retrained}"
+    assert files_under(ledger) == before  # the same files, beta's 3dgs now the retrained one
+    for f in files_under(retrained):
+        if f != "jobs.csv":
+            assert (ledger / f).read_bytes() == (retrained / f).read_bytes(), f
+    rows = {r["job"]: r for r in csv.DictReader((ledger / "jobs.csv").open())}
+    assert rows["train:beta:3dgs"]["commit"] == "new" and rows["train:beta:3dgs"]["wall_s"] == "777.00"
+    assert rows["train:alpha:3dgs"]["commit"] == "old"
+    # alpha's 3dgs is still stale: prune takes it out, and then the ledger is current
+    assert set(suite_ledger.stale_jobs(changed, ledger)) == {"train:alpha:3dgs", "evaluate:alpha:3dgs"}
+    assert ledger_main("prune", "--config", cfg, "--ledger", ledger, capsys=capsys)[0] == 0
+    assert suite_ledger.stale_jobs(changed, ledger) == {}
+    # a source that is itself stale is refused before anything is written
+    changed["runs"]["3dgs"]["options"]["steps"] = 40
+    cfg.write_text(yaml.safe_dump(changed))
+    now = {f: (ledger / f).read_bytes() for f in files_under(ledger)}
+    code, _, err = ledger_main("merge", "--source", retrained, "--config", cfg, "--ledger", ledger, capsys=capsys)
+    assert code == 2 and "2 jobs were run with other options than the config" in err
+    assert {f: (ledger / f).read_bytes() for f in files_under(ledger)} == now
