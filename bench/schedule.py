@@ -122,14 +122,18 @@ TRAIN_BENCHMARK = re.compile(r"^train/(?P<scene>.+)_b(?P<bins>\d+)_(?P<run>[^_/]
 
 def process_cpu_seconds(directory: Path, name: str) -> float | None:
     """A training job's own CPU seconds (``run.process_cpu_s`` of its config.json, written by runs since 2026-11-26),
-    or None (another rule, an older run, a missing or unreadable file)."""
+    or None (another rule, an older run, a missing or unreadable file). A run resumed from a checkpoint
+    (``run.resumed_at_step`` > 0) recorded only its last process's CPU time, as did its benchmark file: its
+    accumulated training seconds (``run.train_seconds``, the wall time of every process's steps) stand for it."""
     m = TRAIN_BENCHMARK.match(name)
     if m is None:
         return None
     p = Path(directory) / "results" / m["scene"] / f"b{m['bins']}" / m["run"] / "config.json"
     try:
-        value = json.loads(p.read_text())["run"]["process_cpu_s"]
-    except (OSError, ValueError, KeyError, TypeError):
+        run = json.loads(p.read_text())["run"]
+        resumed = run.get("resumed_at_step") or 0
+        value = run["train_seconds"] if isinstance(resumed, int) and resumed > 0 else run["process_cpu_s"]
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
         return None
     return float(value) if isinstance(value, (int, float)) and math.isfinite(value) and value >= 0 else None
 

@@ -472,6 +472,12 @@ def test_job_time_prefers_a_training_runs_own_cpu_seconds(tmp_path):
     assert schedule.job_time(tmp_path, "train/my_scene_b6_eigs+", 1) == (300.0, 250.0)
     (run / "config.json").write_text("{trunc")
     assert schedule.job_time(tmp_path, "train/my_scene_b6_eigs+", 1) == (300.0, 250.0)
+    # resumed from a checkpoint at step 1500: its process and benchmark saw only the rest; its training seconds stand
+    (run / "config.json").write_text(json.dumps({"run": {"process_cpu_s": 49.5, "train_seconds": 277.6,
+                                                         "resumed_at_step": 1500}}))  # fmt: skip
+    assert schedule.job_time(tmp_path, "train/my_scene_b6_eigs+", 1) == (300.0, 277.6)
+    (run / "config.json").write_text(json.dumps({"run": {"process_cpu_s": 49.5, "resumed_at_step": 0}}))
+    assert schedule.job_time(tmp_path, "train/my_scene_b6_eigs+", 1) == (300.0, 49.5)
 
 
 def test_a_device_batch_directory_names_the_machine_it_ran_on(tmp_path):
