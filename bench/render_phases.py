@@ -40,6 +40,17 @@ def median_ms(fn, repeats: int) -> float:
     return statistics.median(times) * 1e3
 
 
+def render_inputs(cloud, channels: int) -> tuple[torch.Tensor, ...]:  # noqa: ANN001
+    """A GaussianCloud as the rasterizer takes it: means (N,3), unit quats (N,4), scales (N,3), opacities (N,) and the
+    SH band 0 colour (N, channels) ≥ 0, as eigs.render.gaussians.sh_to_color; float32, contiguous."""
+    means = torch.as_tensor(cloud.means, dtype=torch.float32).contiguous()
+    quats = torch.nn.functional.normalize(torch.as_tensor(cloud.quats, dtype=torch.float32), dim=-1).contiguous()
+    scales = torch.exp(torch.as_tensor(cloud.log_scales, dtype=torch.float32)).contiguous()
+    opac = torch.sigmoid(torch.as_tensor(cloud.opacity, dtype=torch.float32).reshape(-1)).contiguous()
+    colors = (0.5 + 0.28209479177387814 * torch.as_tensor(cloud.f_dc, dtype=torch.float32).reshape(len(means), -1))
+    return means, quats, scales, opac, colors[:, :channels].clamp_min(0).contiguous()
+
+
 def phases(results: Path, n: int, repeats: int) -> list[str]:
     """One row: image, Gaussians, pairs, project / bin / composite ms, the first two's share."""
     b = results / "b4"
@@ -47,12 +58,7 @@ def phases(results: Path, n: int, repeats: int) -> list[str]:
     cloud = resized_cloud(data.init, n) if n > 0 else data.init
     c2w = data.c2w.reshape(-1, 4, 4)[0].double()
     cam = _wrapper.camera_list(torch.linalg.inv(c2w), data.K, torch.float32)
-    means = torch.as_tensor(cloud.means, dtype=torch.float32).contiguous()
-    quats = torch.nn.functional.normalize(torch.as_tensor(cloud.quats, dtype=torch.float32), dim=-1).contiguous()
-    scales = torch.exp(torch.as_tensor(cloud.log_scales, dtype=torch.float32)).contiguous()
-    opac = torch.sigmoid(torch.as_tensor(cloud.opacity, dtype=torch.float32).reshape(-1)).contiguous()
-    colors = (0.5 + 0.28209479177387814 * torch.as_tensor(cloud.f_dc, dtype=torch.float32).reshape(len(means), -1))
-    colors = colors.clamp_min(0).contiguous()  # the SH band 0 colour, as eigs.render.gaussians.sh_to_color
+    means, quats, scales, opac, colors = render_inputs(cloud, data.channels)
     bg = data.background.float().contiguous()
     w, h = data.width, data.height
     ext = _backend.load()

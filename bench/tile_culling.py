@@ -21,7 +21,7 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench._report import add_out_argument, table, write_section  # noqa: E402
-from bench.render_phases import median_ms  # noqa: E402
+from bench.render_phases import median_ms, render_inputs  # noqa: E402
 from bench.train import resized_cloud  # noqa: E402
 from eigs.render import _backend, _wrapper  # noqa: E402
 from eigs.train.data import load_train_data  # noqa: E402
@@ -46,12 +46,7 @@ def compare(results: Path, n: int, repeats: int) -> dict[str, float]:
     data = load_train_data(results / "scene.h5", b / "edi.h5", b / "sfm", b / "init.ply")
     cloud = resized_cloud(data.init, n) if n > 0 else data.init
     C = _backend.load()
-    means = torch.as_tensor(cloud.means, dtype=torch.float32).contiguous()
-    quats = torch.nn.functional.normalize(torch.as_tensor(cloud.quats, dtype=torch.float32), dim=-1).contiguous()
-    scales = torch.exp(torch.as_tensor(cloud.log_scales, dtype=torch.float32)).contiguous()
-    opac = torch.sigmoid(torch.as_tensor(cloud.opacity, dtype=torch.float32).reshape(-1)).contiguous()
-    colors = (0.5 + 0.28209479177387814 * torch.as_tensor(cloud.f_dc, dtype=torch.float32).reshape(len(means), -1))
-    colors = colors[:, : data.channels].clamp_min(0).contiguous()  # band 0, as eigs.render.gaussians.sh_to_color
+    means, quats, scales, opac, colors = render_inputs(cloud, data.channels)
     bg = data.background.float().contiguous()
     w, h = data.width, data.height
     views = range(0, data.c2w.shape[0], 3)

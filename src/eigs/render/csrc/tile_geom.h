@@ -47,6 +47,8 @@ inline bool tile_rect(const S* mean2d, const S* extent, int64_t width, int64_t h
 // pixel-centre rows (the per-row tile test of Speedy-Splat, arXiv:2412.00578), in double, with margins for the
 // kernels' float rounding.  ellipse_rows does the per-Gaussian part once, tile_row_span the per-row part, and
 // tile_mask puts the result in one word.
+constexpr double kSpanPad = 1e-3;  // px added to every ellipse edge, for the kernels' float pixel offsets
+
 struct EllipseRows {
     double mx, my, a, b, det, q;  // centre (px), conic a, b, det = a c - b^2, q = 2 a tau
     double ymax, yr, yl;          // half-height of the ellipse; dy of its rightmost and leftmost points
@@ -72,9 +74,8 @@ inline EllipseRows ellipse_rows(const S* mean2d, const S* extent, const S* conic
         e.whole = true;
         return e;
     }
-    constexpr double kPad = 1e-3;  // px, for the kernels' float pixel offsets
     e.q = 2.0 * e.a * tau;
-    e.ymax = std::sqrt(e.q / e.det) + kPad;
+    e.ymax = std::sqrt(e.q / e.det) + kSpanPad;
     const double xw = std::sqrt(2.0 * c * tau / e.det);  // half-width
     e.yr = -e.b * xw / c;
     e.yl = e.b * xw / c;
@@ -90,14 +91,13 @@ inline bool tile_row_span(const EllipseRows& e, const int32_t* rect, int64_t ty,
     c0 = rect[0];
     c1 = rect[1];
     if (e.whole) return true;
-    constexpr double kPad = 1e-3;
     const int64_t i0 = std::max<int64_t>(e.i0, ty * kTile), i1 = std::min<int64_t>(e.i1, ty * kTile + kTile - 1);
     if (i0 > i1) return false;
     const double y0 = std::max(double(i0) + 0.5 - e.my, -e.ymax), y1 = std::min(double(i1) + 0.5 - e.my, e.ymax);
     if (y0 > y1) return false;
     const double yr = std::clamp(e.yr, y0, y1), yl = std::clamp(e.yl, y0, y1);
-    const double xr = (-e.b * yr + std::sqrt(std::max(0.0, e.q - e.det * yr * yr))) / e.a + kPad;
-    const double xl = (-e.b * yl - std::sqrt(std::max(0.0, e.q - e.det * yl * yl))) / e.a - kPad;
+    const double xr = (-e.b * yr + std::sqrt(std::max(0.0, e.q - e.det * yr * yr))) / e.a + kSpanPad;
+    const double xl = (-e.b * yl - std::sqrt(std::max(0.0, e.q - e.det * yl * yl))) / e.a - kSpanPad;
     const double fj0 = std::ceil(e.mx + xl - 0.5), fj1 = std::floor(e.mx + xr - 0.5);
     const int64_t j0 = fj0 > double(e.j0) ? int64_t(fj0) : e.j0;
     const int64_t j1 = fj1 < double(e.j1) ? int64_t(fj1) : e.j1;

@@ -108,7 +108,7 @@ class FusedMLP(torch.autograd.Function):
         xc = x.to(cd)
         n = x.shape[0]
         rows = block_rows(xc)
-        fused = cd == torch.bfloat16 and xc.device.type == "cpu" and linear_relu_is_fused(xc.device)
+        fused = cd == torch.bfloat16 and linear_relu_is_fused(xc.device)
         acts: list[list[Tensor]] = [[] for _ in weights[:-1]]  # per hidden activation, its (rows, width) blocks
         out = x.new_empty(n, weights[-1].shape[0])
         last = xc.new_empty(min(rows, n), weights[-1].shape[0]) if cd != x.dtype else None
