@@ -27,7 +27,7 @@ from eigs.train.data import TrainData
 from eigs.train.field.methods import FieldMethod
 from eigs.train.field.model import FieldModel, field_box, lr_factor, voxel_schedule
 from eigs.train.loop import HELD_OUT_COLUMNS, RunResult, RunTrainer, fit, held_out_scores
-from eigs.train.optim import adam
+from eigs.train.optim import Optimizer, adam
 from eigs.train.resolve import build_method
 from eigs.util.options import Options
 
@@ -70,7 +70,7 @@ class FieldTrainer(RunTrainer):
         self.method_opt = adam(params, lr=self.method.lr()) if params else None
         self.occupied = 1.0  # fraction of the voxels the occupancy mask keeps
 
-    def _grid_optimizer(self) -> torch.optim.Adam:
+    def _grid_optimizer(self) -> Optimizer:
         return adam(self.model.param_groups(), eps=1e-15)
 
     # ------------------------------------------------------------------ checkpoints

@@ -15,7 +15,7 @@ from torch import Tensor
 from eigs.artifacts.gaussians import GaussianCloud
 from eigs.render.gaussians import render_gaussians
 from eigs.train.config import TrainConfig
-from eigs.train.optim import adam
+from eigs.train.optim import Optimizer, adam
 from eigs.util.schedule import exp_decay
 
 PARAM_NAMES = ("means", "sh0", "shN", "log_scales", "quats", "opacities")
@@ -114,7 +114,7 @@ def scene_extent(camera_centres: np.ndarray) -> float:
     return max(1.1 * float(np.linalg.norm(c - c.mean(axis=0), axis=1).max()), 1e-6)
 
 
-def make_optimizer(model: GaussianModel, cfg: TrainConfig, extent: float) -> torch.optim.Adam:
+def make_optimizer(model: GaussianModel, cfg: TrainConfig, extent: float) -> Optimizer:
     """Adam with one param group per parameter, named; eps 1e-15 as 3DGS. :func:`eigs.train.optim.adam` (fused)."""
     lrs = {
         "means": cfg.lr_means * extent,

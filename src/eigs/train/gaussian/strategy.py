@@ -25,6 +25,7 @@ from torch import Tensor
 
 from eigs.train.config import TrainConfig
 from eigs.train.gaussian.model import PARAM_NAMES, GaussianModel
+from eigs.train.optim import Optimizer
 
 log = logging.getLogger(__name__)
 
@@ -45,7 +46,7 @@ def quat_to_rotmat(q: Tensor) -> Tensor:
 
 def remap_gaussians(
     model: GaussianModel,
-    optimizer: torch.optim.Optimizer,
+    optimizer: Optimizer,
     keep: Tensor,
     new: dict[str, Tensor] | None = None,
     new_state_from: Tensor | None = None,
@@ -144,7 +145,7 @@ class DensifyStrategy:
         self.count += visible.to(torch.float32)  # type: ignore[operator]
 
     @torch.no_grad()
-    def after_step(self, step: int, model: GaussianModel, optimizer: torch.optim.Optimizer) -> RefineReport | None:
+    def after_step(self, step: int, model: GaussianModel, optimizer: Optimizer) -> RefineReport | None:
         """Refine after optimiser step ``step`` (1-based count of steps done). Returns what changed, or None."""
         cfg = self.cfg
         if not cfg.densify:
@@ -159,7 +160,7 @@ class DensifyStrategy:
         return report
 
     # ------------------------------------------------------------------ operations
-    def _refine(self, step: int, model: GaussianModel, optimizer: torch.optim.Optimizer) -> RefineReport:
+    def _refine(self, step: int, model: GaussianModel, optimizer: Optimizer) -> RefineReport:
         cfg = self.cfg
         p = model.params
         n = len(model)
@@ -202,7 +203,7 @@ class DensifyStrategy:
         self.count = torch.zeros(len(model))
         return report
 
-    def _split(self, model: GaussianModel, optimizer: torch.optim.Optimizer, idx: Tensor) -> None:
+    def _split(self, model: GaussianModel, optimizer: Optimizer, idx: Tensor) -> None:
         """Replace each Gaussian of ``idx`` by two children sampled from it, scales divided by 1.6 (3DGS)."""
         p = {k: v.detach() for k, v in model.params.items()}
         n = p["means"].shape[0]
@@ -217,7 +218,7 @@ class DensifyStrategy:
         keep[idx] = False
         remap_gaussians(model, optimizer, torch.nonzero(keep).squeeze(1), new, new_state_from=None)
 
-    def _reset_opacities(self, model: GaussianModel, optimizer: torch.optim.Optimizer) -> None:
+    def _reset_opacities(self, model: GaussianModel, optimizer: Optimizer) -> None:
         """Clamp opacities to 2 × the pruning threshold and zero their Adam moments (3DGS's reset)."""
         ceiling = 2.0 * self.cfg.prune_opacity
         logit = math.log(ceiling / (1.0 - ceiling))
