@@ -3,7 +3,8 @@ train `eigs+` exactly as config/config.yaml and config/davis346.yaml do, and `ei
 `eigs+-ds` (the D-SSIM alone) differing only in the sharp-frame term from the `eigs+` they were measured against
 (before 2026-11-30: no latent D-SSIM, no `latent_weight_dark`); config/ceiling_d346.yaml's `oracle-ceiling` is
 davis346's oracle trained on the 3DGS reference implementation's schedule; config/davis346_noise.yaml is davis346's
-scenes with frame noise and its runs. All on the source's scenes and upstream stages (results/<scene>/b4/ shared)."""
+scenes with frame noise and its runs; config/seeds_d346.yaml two of davis346's runs with other seeds. All on the
+source's scenes and upstream stages (results/<scene>/b4/ shared)."""
 
 from __future__ import annotations
 
@@ -83,3 +84,18 @@ def test_the_noisy_scenes_are_davis346s_with_frame_noise_and_its_runs():
     assert set(study["runs"]) == {"3dgs", "edi-3dgs", "eigs", "eigs+", "oracle"}
     for run, spec in study["runs"].items():
         assert resolved(spec) == resolved(base["runs"][run]), run
+
+
+def test_the_seed_study_is_davis346s_runs_with_other_seeds():
+    """config/seeds_d346.yaml shares results/d346-blocks with davis346.yaml: its seed-0 runs must be davis346's, and
+    each seeded run must differ from its base in the seed alone (else its spread measures something else)."""
+    base, study = load("davis346.yaml"), load("seeds_d346.yaml")
+    same_upstream(base, study)
+    assert set(study["scenes"]) == {"d346-blocks"}
+    for run in ("edi-3dgs", "eigs+"):
+        assert resolved(study["runs"][run]) == resolved(base["runs"][run]), run
+        assert resolved(study["runs"][run])["train.seed"] == 0
+        for seed in (1, 2):
+            seeded = resolved(study["runs"][f"{run}-s{seed}"])
+            assert differing(resolved(base["runs"][run]), seeded) == {"train.seed"} and seeded["train.seed"] == seed
+    assert set(study["runs"]) == {"edi-3dgs", "eigs+", "edi-3dgs-s1", "edi-3dgs-s2", "eigs+-s1", "eigs+-s2"}
