@@ -162,6 +162,7 @@ def test_fused_adam_state_dict_loads_both_ways():
             assert torch.equal(x, y), (first.__name__, second.__name__)
         ours, theirs = (a, b) if first is FusedAdam else (b, a)
         sd_ours, sd_theirs = ours.state_dict(), theirs.state_dict()
+
         def options(sd: dict) -> list[dict]:
             return [{k: v for k, v in grp.items() if k != "lr"} for grp in sd["param_groups"]]  # lr: a's is older
 
