@@ -88,6 +88,23 @@ def test_run_stopped_part_way_through_a_longer_schedule(data, tmp_path):
         _cfg(schedule_steps=-1).validate()
 
 
+def test_checkpoint_with_moments_adam_cannot_make_is_ignored(data, tmp_path, caplog):
+    """A checkpoint whose Adam moments are finite but impossible (one exp_avg of 3e36: a damaged byte) would send a
+    parameter to ±inf on the first step; it is ignored with a warning and the run starts over, finite."""
+    cfg = _cfg(method="3dgs", steps=60)
+    train(data, cfg, tmp_path / "run", stop_after=40)
+    ckpt = partial_dir(tmp_path / "run") / "checkpoint.pt"
+    state = torch.load(ckpt, weights_only=False)
+    opt = state["optimizer"]
+    index = next(g["params"][0] for g in opt["param_groups"] if g.get("name") == "opacities")
+    opt["state"][index]["exp_avg"][0] = 3e36
+    torch.save(state, ckpt)
+    caplog.set_level("INFO")
+    result = train(data, cfg, tmp_path / "run")
+    assert "are inconsistent" in caplog.text and "resumed from" not in caplog.text
+    assert all(bool(torch.isfinite(t).all()) for t in result.model.params.values())
+
+
 def test_checkpoint_of_another_config_is_ignored(data, tmp_path, caplog):
     train(data, _cfg(method="3dgs", steps=100), tmp_path / "run", stop_after=50)
     caplog.set_level("INFO")

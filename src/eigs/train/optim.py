@@ -13,6 +13,7 @@ import ``torch._dynamo`` (and sympy) on first use: seconds of every training pro
 
 from __future__ import annotations
 
+import math
 from collections import defaultdict
 from collections.abc import Iterable
 from copy import deepcopy
@@ -148,3 +149,17 @@ def adam(params: Iterable[Any], **kwargs: Any) -> Optimizer:
     tensors = [p for g in params for p in (g["params"] if isinstance(g, dict) else [g])]
     fused = bool(tensors) and all(t.device.type in FUSED_DEVICES and t.is_floating_point() for t in tensors)
     return FusedAdam(params, **kwargs) if fused else torch.optim.Adam(params, foreach=True, **kwargs)
+
+
+def moments_consistent(exp_avg: torch.Tensor, exp_avg_sq: torch.Tensor, betas: tuple[float, float], eps: float) -> bool:
+    """Whether Adam moments could come from some gradient history: ``|m| ≤ C·√v`` entry by entry, with
+    ``C = (1 − β1) / √((1 − β2)(1 − β1²/β2))`` (Cauchy–Schwarz on m = (1 − β1) Σ β1^k g_k against
+    v = (1 − β2) Σ β2^k g_k²; needs β1² < β2, else no bound is checked), relaxed by 0.1 % for float32 rounding and by
+    ``eps`` for squares that underflowed. A damaged checkpoint can hold finite moments that break it (an exp_avg of
+    3e36 against a v of 1e-9), and Adam's first step from them overflows the parameter to ±inf."""
+    b1, b2 = float(betas[0]), float(betas[1])
+    if not b1 * b1 < b2:
+        return True
+    c = (1.0 - b1) / math.sqrt((1.0 - b2) * (1.0 - b1 * b1 / b2))
+    m, v = exp_avg.detach().double(), exp_avg_sq.detach().double()
+    return bool((m.abs() <= c * 1.001 * v.clamp_min(0).sqrt() + eps).all())

@@ -28,6 +28,7 @@ from eigs.train.gaussian.methods import Method
 from eigs.train.gaussian.model import PARAM_NAMES, GaussianModel, make_optimizer, means_lr, scene_extent
 from eigs.train.gaussian.strategy import DensifyStrategy
 from eigs.train.loop import HELD_OUT_COLUMNS, RunResult, RunTrainer, fit, held_out_scores
+from eigs.train.optim import moments_consistent
 from eigs.train.resolve import build_method
 from eigs.util.options import Options
 from eigs.util.schedule import exp_decay
@@ -109,9 +110,12 @@ class Trainer(RunTrainer):
         if not isinstance(opt, dict) or not isinstance(opt.get("state"), dict):
             return "optimizer state missing"
         shape_of = {}  # Adam state index → the shape its moments must have (the Gaussian parameters' groups)
+        group_of = {}  # Adam state index → its group (betas and eps for the moments' consistency)
         for group in opt.get("param_groups", []) if isinstance(opt.get("param_groups"), list) else []:
             if isinstance(group, dict) and group.get("name") in PARAM_NAMES and isinstance(group.get("params"), list):
                 shape_of.update({i: params[group["name"]].shape for i in group["params"]})
+            if isinstance(group, dict) and isinstance(group.get("params"), list) and _adam_hyperparameters_valid(group):
+                group_of.update({i: group for i in group["params"] if isinstance(i, int)})
         for index, entry in opt["state"].items():
             if not isinstance(entry, dict) or any(not isinstance(entry.get(k), torch.Tensor) for k in ADAM_STATE):
                 return f"optimizer state {index} lacks {', '.join(ADAM_STATE)}"
@@ -127,6 +131,10 @@ class Trainer(RunTrainer):
                 return f"optimizer exp_avg_sq {index} has negative values"
             if entry["step"].numel() != 1 or not float(entry["step"]) >= 1:
                 return f"optimizer step {index} is {entry['step'].tolist()}"
+            group = group_of.get(index)
+            if group is not None and not moments_consistent(entry["exp_avg"], entry["exp_avg_sq"], group["betas"],
+                                                            float(group["eps"])):  # fmt: skip
+                return f"optimizer moments {index} are inconsistent (|exp_avg| beyond what exp_avg_sq allows)"
         for group in opt.get("param_groups", []) if isinstance(opt.get("param_groups"), list) else []:
             if not isinstance(group, dict) or not _adam_hyperparameters_valid(group):
                 return f"optimizer hyperparameters of group {group.get('name') if isinstance(group, dict) else '?'}"
