@@ -27,6 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench._report import add_out_argument, table, write_section  # noqa: E402
 from bench.train import resized_cloud  # noqa: E402
 from eigs.render import _backend, _wrapper  # noqa: E402
+from eigs.render.gaussians import SH_C0  # noqa: E402
 from eigs.train.data import load_train_data  # noqa: E402
 
 
@@ -47,7 +48,7 @@ def render_inputs(cloud, channels: int) -> tuple[torch.Tensor, ...]:  # noqa: AN
     quats = torch.nn.functional.normalize(torch.as_tensor(cloud.quats, dtype=torch.float32), dim=-1).contiguous()
     scales = torch.exp(torch.as_tensor(cloud.log_scales, dtype=torch.float32)).contiguous()
     opac = torch.sigmoid(torch.as_tensor(cloud.opacity, dtype=torch.float32).reshape(-1)).contiguous()
-    colors = (0.5 + 0.28209479177387814 * torch.as_tensor(cloud.f_dc, dtype=torch.float32).reshape(len(means), -1))
+    colors = 0.5 + SH_C0 * torch.as_tensor(cloud.f_dc, dtype=torch.float32).reshape(len(means), -1)
     return means, quats, scales, opac, colors[:, :channels].clamp_min(0).contiguous()
 
 
