@@ -78,6 +78,68 @@ def test_write_and_read_back(small, tmp_path):
     assert img.std() > 10
 
 
+def test_streamed_events_write_the_scene_held_in_memory(small, tmp_path, monkeypatch):
+    """`eigs synth -o` streams each chunk of events into the scene file as it is simulated (memory: one view's);
+    the file must hold exactly the scene that generation in memory gives, view index and contact sheet included,
+    and no chunk may be held back until the end."""
+    import json
+
+    import cv2
+
+    from eigs.cli import main
+    from eigs.scene import SceneWriter
+    from eigs.synth.contact_sheet import contact_sheet
+
+    appended: list[int] = []
+    original = SceneWriter.append_events
+
+    def spy(self, x, y, t, p):
+        appended.append(int(t.shape[0]))
+        return original(self, x, y, t, p)
+
+    monkeypatch.setattr(SceneWriter, "append_events", spy)
+    out, sheet = tmp_path / "s.h5", tmp_path / "sheet.png"
+    assert main(["synth", "--scene", "toy", "--overrides", json.dumps(SMALL), "-o", str(out),
+                 "--contact-sheet", str(sheet)]) == 0
+    ref = small.scene
+    back = read_scene(out)
+    assert len(appended) > 3 * 16 and sum(appended) == len(ref.events)  # one append per simulated step
+    for name in ("x", "y", "t", "p", "view_index"):
+        assert np.array_equal(getattr(back.events, name), getattr(ref.events, name)), name
+    assert np.array_equal(small.view_index, ref.events.view_index)
+    assert np.array_equal(back.frames.blurry, ref.frames.blurry)
+    assert np.array_equal(back.sharp.images, ref.sharp.images)
+    assert np.array_equal(back.trajectory.c2w, ref.trajectory.c2w)
+    expected = contact_sheet(ref)
+    assert np.array_equal(cv2.imread(str(sheet))[..., ::-1], expected)
+
+
+def test_event_sink_keeps_no_events_and_counts_them(small):
+    got: list[np.ndarray] = []
+    g = generate("toy", SMALL, show_progress=False, event_sink=lambda c: got.append(c.t))
+    assert g.scene.events is None
+    t = np.concatenate(got)
+    assert np.array_equal(t, small.scene.events.t)
+    assert g.stats["events"] == t.shape[0] and np.array_equal(g.view_index, small.view_index)
+
+
+def test_deferred_header_must_come_with_the_events_camera(small, tmp_path):
+    from eigs.scene import Camera, SceneWriter
+
+    ref = small.scene
+    header = type(ref)(**{**ref.__dict__, "events": None})
+    other = Camera(K=ref.camera.K * np.array([[2.0], [2.0], [1.0]]), width=ref.camera.width,
+                   height=ref.camera.height)
+    path = tmp_path / "x.h5"
+    with pytest.raises(EigsError, match="not the one the events were written for"), \
+            SceneWriter(path, None, camera=other) as w:
+        w.append_events(ref.events.x, ref.events.y, ref.events.t, ref.events.p)
+        w.set_header(header)
+    with pytest.raises(RuntimeError, match="set_header"), SceneWriter(path, None, camera=ref.camera) as w:
+        w.append_events(ref.events.x, ref.events.y, ref.events.t, ref.events.p)
+    assert list(tmp_path.iterdir()) == [], "a failed write must leave nothing behind"
+
+
 def test_zero_shake_gives_blurry_equal_to_sharp():
     g = generate("toy", {**SMALL, "shake": 0.0, "shot_noise_hz": 0.0, "leak_rate_hz": 0.0}, show_progress=False)
     s = g.scene

@@ -31,7 +31,7 @@ from eigs.scene.model import (
 from eigs.scene.validate import (
     check_event_chunk,
     check_event_dtypes,
-    check_view_index,
+    check_view_index_sorted,
     validate,
     validate_header,
 )
@@ -74,26 +74,59 @@ class SceneWriter:
     The header (everything but raw events) is validated on entry; each chunk is validated as it arrives
     (range, polarity, sortedness across chunks); the view index at the end. On any error nothing is left
     behind.
+
+    A writer that learns the header only while it streams (the synth: frames are made view by view with their
+    events) passes ``header=None`` and the ``camera`` (the events' range check), then :meth:`set_header` before
+    the end; the header is validated then and must have that camera.
     """
 
-    def __init__(self, path: str | os.PathLike, header: Scene, *, compression: str | None = None):
+    def __init__(
+        self,
+        path: str | os.PathLike,
+        header: Scene | None,
+        *,
+        compression: str | None = None,
+        camera: Camera | None = None,
+    ):
+        if header is None and camera is None:
+            raise ValueError("SceneWriter: give the header, or the camera and set_header() later")
         self.path = Path(path)
         self.header = header
+        self.camera = header.camera if header is not None else camera
         self.compression = compression
         self._stack = contextlib.ExitStack()
         self._n = 0
         self._last_t: int | None = None
         self._view_index: np.ndarray | None = None
         self._has_events = False
+        self._pending: list[tuple[np.ndarray, ...]] = []  # checked chunks not yet written
+        self._pending_rows = 0
 
     # -- context management -------------------------------------------------------------------------
     def __enter__(self) -> SceneWriter:
-        validate_header(str(self.path), self.header)
-        ensure_space(self.path, nbytes_of(self.header))
+        if self.header is not None:
+            validate_header(str(self.path), self.header)
+            ensure_space(self.path, nbytes_of(self.header))
         self._tmp = self._stack.enter_context(atomic_path(self.path))
         self._f = self._stack.enter_context(h5py.File(self._tmp, "w"))
-        self._write_header()
+        if self.header is not None:
+            self._write_header()
         return self
+
+    def set_header(self, header: Scene) -> None:
+        """The header of a writer opened with ``header=None``: validated and written now; its camera must be the
+        one the events were checked against."""
+        if self.header is not None:
+            raise RuntimeError("SceneWriter: the header is written already")
+        validate_header(str(self.path), header)
+        cam = header.camera
+        if (cam.width, cam.height) != (self.camera.width, self.camera.height) or not np.array_equal(
+            cam.K, self.camera.K
+        ):
+            raise EigsError(self.path, "the header's camera is not the one the events were written for")
+        ensure_space(self.path, nbytes_of(header))
+        self.header = header
+        self._write_header()
 
     def __exit__(self, exc_type, exc, tb) -> bool:
         if exc_type is None:
@@ -169,15 +202,33 @@ class SceneWriter:
         self._has_events = True
 
     def append_events(self, x: np.ndarray, y: np.ndarray, t: np.ndarray, p: np.ndarray) -> None:
-        """Append a time-ordered chunk: x, y (N,) uint16; t (N,) int64 µs ≥ the previous chunk's; p (N,) int8 ±1."""
+        """Append a time-ordered chunk: x, y (N,) uint16; t (N,) int64 µs ≥ the previous chunk's; p (N,) int8 ±1.
+        Checked now; small chunks are gathered to a whole HDF5 chunk's rows before they are written (a write of a
+        few events into a 2 MB chunk would read and write all of it)."""
         x, y = np.asarray(x, np.uint16), np.asarray(y, np.uint16)
         t, p = np.asarray(t, np.int64), np.asarray(p, np.int8)
-        cam = self.header.camera
+        cam = self.camera
         self._last_t = check_event_chunk(str(self.path), x, y, t, p, cam.width, cam.height, self._last_t)
         self._event_datasets()
-        ensure_space(self.path, nbytes_of(x, y, t, p))
-        n, m = self._n, t.shape[0]
-        for name, a in (("x", x), ("y", y), ("t", t), ("p", p)):
+        if t.shape[0] >= EVENT_CHUNK_ROWS:
+            self._flush()
+            self._write((x, y, t, p))
+            return
+        self._pending.append(tuple(a.copy() for a in (x, y, t, p)))  # the caller may reuse its buffers
+        self._pending_rows += t.shape[0]
+        if self._pending_rows >= EVENT_CHUNK_ROWS:
+            self._flush()
+
+    def _flush(self) -> None:
+        if self._pending:
+            cols = tuple(np.concatenate(c) for c in zip(*self._pending, strict=True))
+            self._pending, self._pending_rows = [], 0
+            self._write(cols)
+
+    def _write(self, cols: tuple[np.ndarray, ...]) -> None:
+        ensure_space(self.path, nbytes_of(*cols))
+        n, m = self._n, cols[2].shape[0]
+        for name, a in zip(("x", "y", "t", "p"), cols, strict=True):
             ds = self._f[f"events/{name}"]
             ds.resize((n + m,))
             ds[n:] = a
@@ -188,17 +239,17 @@ class SceneWriter:
         self._view_index = np.asarray(view_index, dtype=np.int64)
 
     def _finish(self) -> None:
+        if self.header is None:
+            raise RuntimeError("SceneWriter: set_header() was not called")
         if self._view_index is not None and not self._has_events:
             self._event_datasets()
+        self._flush()
         if self._has_events:
             if self._view_index is not None:
-                t = self._f["events/t"][:]
-                ev = Events(
-                    np.zeros(0, np.uint16), np.zeros(0, np.uint16), t, np.zeros(0, np.int8), self._view_index
-                )
                 exposure = self.header.frames.exposure_us if self.header.frames is not None else None
                 n_views = self.header.n_views or self._view_index.shape[0]
-                check_view_index(str(self.path), ev, exposure, n_views)
+                check_view_index_sorted(str(self.path), self._view_index, self._n, self._f["events/t"], exposure,
+                                        n_views)
                 self._f.create_dataset("events/view_index", data=self._view_index)
             self._f["events"].attrs["count"] = self._n
 

@@ -73,6 +73,13 @@ class Events:
     def __len__(self) -> int:
         return int(self.t.shape[0])
 
+    def view(self, v: int) -> Events:
+        """View ``v``'s exposure events: the slice ``view_index[v]`` (a view, no copy; its own index is None)."""
+        if self.view_index is None:
+            raise ValueError("these events have no view index")
+        a, b = (int(k) for k in self.view_index[v])
+        return Events(self.x[a:b], self.y[a:b], self.t[a:b], self.p[a:b])
+
     @staticmethod
     def empty() -> Events:
         return Events(

@@ -7,6 +7,7 @@ validating 100 M events needs little extra memory.
 from __future__ import annotations
 
 from collections.abc import Iterator
+from typing import Any
 
 import numpy as np
 
@@ -96,17 +97,47 @@ def check_event_chunk(
     return int(t[-1])
 
 
+def _view_index_ranges(path: str, vi: np.ndarray, n: int, n_views: int) -> None:
+    _dtype(path, "events/view_index", vi, np.int64)
+    _shape(path, "events/view_index", vi, (n_views, 2))
+    if np.any(vi < 0) or np.any(vi > n) or np.any(vi[:, 1] < vi[:, 0]):
+        raise EigsError(path, f"events/view_index has offsets outside [0, {n}] or stop < start")
+
+
+def check_view_index_sorted(
+    path: str, vi: np.ndarray, n: int, t: Any, exposure_us: np.ndarray | None, n_views: int
+) -> None:
+    """:func:`check_view_index` for a stream too large to hold: ``t`` (N,) sorted timestamps that are only indexed
+    (an HDF5 dataset will do) at the 2V offsets' neighbours. With t sorted, offset k is the first event at or after
+    time b exactly when t[k − 1] < b ≤ t[k] (each side where it exists)."""
+    _view_index_ranges(path, vi, n, n_views)
+    if exposure_us is None:
+        return
+    k = vi.reshape(-1)
+    b = np.asarray(exposure_us, np.int64).reshape(-1)
+    idx = np.unique(np.concatenate([k[k > 0] - 1, k[k < n]]))
+    vals = np.asarray(t[idx] if idx.size else np.zeros(0, np.int64), np.int64)
+    at = dict(zip(idx.tolist(), vals.tolist(), strict=True))
+    for j in range(k.shape[0]):
+        kj, bj = int(k[j]), int(b[j])
+        if (kj > 0 and at[kj - 1] >= bj) or (kj < n and at[kj] < bj):
+            v, side = divmod(j, 2)
+            raise EigsError(
+                path,
+                f"events/view_index does not cover the events of view {v}'s exposure "
+                f"[{exposure_us[v, 0]}, {exposure_us[v, 1]}) µs: has [{vi[v, 0]}, {vi[v, 1]}), whose "
+                f"{'start' if side == 0 else 'stop'} {kj} is not the first event at or after {bj} µs",
+            )
+
+
 def check_view_index(path: str, events: Events, exposure_us: np.ndarray | None, n_views: int) -> None:
     """``view_index`` (V, 2) must be non-decreasing offsets in [0, N]; with known exposures it must equal exactly
     the events with start ≤ t < end of each view."""
     vi = events.view_index
     if vi is None:
         return
-    _dtype(path, "events/view_index", vi, np.int64)
-    _shape(path, "events/view_index", vi, (n_views, 2))
     n = len(events)
-    if np.any(vi < 0) or np.any(vi > n) or np.any(vi[:, 1] < vi[:, 0]):
-        raise EigsError(path, f"events/view_index has offsets outside [0, {n}] or stop < start")
+    _view_index_ranges(path, vi, n, n_views)
     if exposure_us is not None:
         lo = np.searchsorted(events.t, exposure_us[:, 0], side="left")
         hi = np.searchsorted(events.t, exposure_us[:, 1], side="left")

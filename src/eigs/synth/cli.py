@@ -137,17 +137,30 @@ def run(args: argparse.Namespace) -> int:
     get_spec(args.scene)  # fail fast on a bad name
     layers = _load_overrides(args)
 
-    from eigs.synth.generate import generate
+    from eigs.synth.generate import generate, scene_camera
 
-    g = generate(args.scene, layers=layers, threads=max(1, args.threads or 1))
-    if args.output:
-        from eigs.scene import write_scene
+    threads = max(1, args.threads or 1)
+    view_events = None
+    if args.output and not (args.e2nerf_layout or args.e2nerf_real_layout):
+        # the events go to the scene file as they are simulated: memory holds one view's, not the recording's
+        from eigs.scene import SceneWriter, read_events
 
-        write_scene(g.scene, args.output)
+        with SceneWriter(args.output, None, camera=scene_camera(args.scene, layers=layers)) as w:
+            g = generate(args.scene, layers=layers, threads=threads,
+                         event_sink=lambda c: w.append_events(c.x, c.y, c.t, c.p))
+            w.set_header(g.scene)
+            w.set_view_index(g.view_index)
+        view_events = lambda v: read_events(args.output, *(int(k) for k in g.view_index[v]))  # noqa: E731
+    else:  # the layouts' writers take the events from memory
+        g = generate(args.scene, layers=layers, threads=threads)
+        if args.output:
+            from eigs.scene import write_scene
+
+            write_scene(g.scene, args.output)
     if args.contact_sheet:
         from eigs.synth.contact_sheet import write_contact_sheet
 
-        write_contact_sheet(g.scene, args.contact_sheet)
+        write_contact_sheet(g.scene, args.contact_sheet, view_events=view_events)
     if args.e2nerf_layout:
         from eigs.synth.export_e2nerf import write_e2nerf_synthetic
 

@@ -7,10 +7,11 @@ view's net signed event count over its exposure (red: ON, blue: OFF, white: none
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 
 import numpy as np
 
-from eigs.scene import Scene
+from eigs.scene import Events, Scene
 from eigs.synth.response import decode
 from eigs.util.image import linear_to_srgb, to_uint8, write_png
 
@@ -42,9 +43,16 @@ def _pick(n: int, k: int) -> list[int]:
     return sorted(set(np.linspace(0, n - 1, min(n, k)).round().astype(int).tolist())) if n > 0 else []
 
 
-def contact_sheet(scene: Scene, *, max_columns: int = 8, min_tile_width: int = 128) -> np.ndarray:
+def contact_sheet(
+    scene: Scene,
+    *,
+    max_columns: int = 8,
+    min_tile_width: int = 128,
+    view_events: Callable[[int], Events] | None = None,
+) -> np.ndarray:
     """(H', W', 3) uint8 RGB contact sheet of ``scene`` (rows: blurry, sharp GT at the first latent time, events,
-    novel views; whichever exist)."""
+    novel views; whichever exist). ``view_events(v)``: view v's exposure events, for a scene whose events are not
+    in memory (default: sliced from ``scene.events`` by its view index)."""
     import cv2
 
     w, h = scene.camera.width, scene.camera.height
@@ -62,11 +70,13 @@ def contact_sheet(scene: Scene, *, max_columns: int = 8, min_tile_width: int = 1
         if tiles:
             rows.append(("sharp t0", tiles))
     ev = scene.events
-    if ev is not None and ev.view_index is not None:
+    if view_events is None and ev is not None and ev.view_index is not None:
+        view_events = ev.view
+    if view_events is not None:
         tiles = []
         for v in cols:
-            a, b = ev.view_index[v]
-            tiles.append(event_image(ev.x[a:b], ev.y[a:b], ev.p[a:b], w, h))
+            e = view_events(v)
+            tiles.append(event_image(e.x, e.y, e.p, w, h))
         rows.append(("events", tiles))
     if sh is not None:
         novel = np.flatnonzero(sh.kind == 1)

@@ -50,7 +50,8 @@ class Generated:
     """A generated scene with what produced it. ``scene``: the :class:`eigs.scene.Scene` to write;
     ``path``: the ground-truth :class:`CameraPath` (callable: poses at any µs time); ``novel_c2w``: (N, 4, 4);
     ``blur_px``: (P,) float32 blur extents (px) of every visible scene point over all training views;
-    ``stats``: counts and timings."""
+    ``stats``: counts and timings. ``scene.events`` is None when the events went to an ``event_sink``; their
+    view index is ``view_index`` (V, 2) int64 either way."""
 
     scene: Scene
     params: dict[str, Any]
@@ -59,6 +60,7 @@ class Generated:
     caster: RayCaster
     novel_c2w: np.ndarray
     blur_px: np.ndarray
+    view_index: np.ndarray
     stats: dict[str, Any] = field(default_factory=dict)
 
 
@@ -165,6 +167,17 @@ def build_path(p: dict[str, Any], spec: SceneSpec, rng: np.random.Generator) -> 
     return CameraPath(train, tl, shake, still), novel
 
 
+def scene_camera(
+    name: str,
+    overrides: dict[str, Any] | None = None,
+    *,
+    layers: list[tuple[str, dict[str, Any] | None]] | None = None,
+) -> Camera:
+    """The camera :func:`generate` gives built-in scene ``name`` with these parameters (arguments as there)."""
+    p = resolve_params(name, *(layers or []), ("overrides", overrides))
+    return Camera(K=intrinsics(p["width"], p["height"], p["fov_deg"]), width=p["width"], height=p["height"])
+
+
 def generate(
     name: str,
     overrides: dict[str, Any] | None = None,
@@ -172,13 +185,17 @@ def generate(
     layers: list[tuple[str, dict[str, Any] | None]] | None = None,
     show_progress: bool = True,
     threads: int = 1,
+    event_sink: Callable[[EventChunk], None] | None = None,
 ) -> Generated:
     """Generate built-in scene ``name`` (see ``eigs synth --list``).
 
     ``overrides``: parameter → value (see :data:`eigs.synth.scenes.DEFAULTS`); ``layers``: several named override
     mappings applied in order before ``overrides`` (the CLI passes its config file then ``--overrides``).
     Deterministic for given parameters (the ``seed`` drives shake, threshold mismatch and noise), whatever
-    ``threads`` (frames rendered in parallel).
+    ``threads`` (frames rendered in parallel). ``event_sink``: called with each time-ordered chunk of events as
+    it is simulated, which then are not kept (``scene.events`` is None; ``view_index`` and ``stats["events"]``
+    describe them): memory bounded by one view's frames, not the recording's events (an 800×800 view and its gap
+    make ~60 million events, 0.8 GB).
     """
     t_start = time.perf_counter()
     spec = get_spec(name)
@@ -211,20 +228,29 @@ def generate(
     blurry = np.zeros((n_views, height, width, 3), np.uint8)
     sharp0 = np.zeros((n_views, height, width, 3), np.uint8)
     chunks: list[EventChunk] = []
+    bounds = tl.exposures.reshape(-1).astype(np.int64)  # (2V,) exposure starts and ends, µs
+    before = np.zeros(bounds.shape[0], np.int64)  # events with t < each bound, over the chunks so far
+    n_events = 0
     blur_parts: list[np.ndarray] = []
     frame_times: list[np.ndarray] = []
     t_render = t_sim = 0.0
     exp_hist = np.zeros_like(sim.crossing_hist)
 
     def feed(frames_rgb: np.ndarray, times: np.ndarray, *, reset_first: bool = False) -> None:
-        nonlocal t_sim
+        nonlocal t_sim, n_events
         t0 = time.perf_counter()
         logs = log_luma(frames_rgb)
         for i in range(times.shape[0]):
             if sim.t is None:
                 sim.reset(logs[i], float(times[i]))
                 continue
-            chunks.append(sim.step(logs[i], float(times[i])))
+            chunk = sim.step(logs[i], float(times[i]))
+            np.add(before, np.searchsorted(chunk.t, bounds, side="left"), out=before)
+            n_events += chunk.t.shape[0]
+            if event_sink is None:
+                chunks.append(chunk)
+            else:
+                event_sink(chunk)
             if reset_first and i == 0:
                 sim.reset(logs[i], float(times[i]))
         t_sim += time.perf_counter() - t0
@@ -261,13 +287,13 @@ def generate(
             feed(gframes, gt)
             frame_times.append(gt)
 
-    ev = EventChunk.concat(chunks)
     exposures = tl.exposures
-    view_index = np.stack(
-        [np.searchsorted(ev.t, exposures[:, 0], side="left"), np.searchsorted(ev.t, exposures[:, 1], side="left")],
-        axis=1,
-    ).astype(np.int64)
-    events = Events(ev.x, ev.y, ev.t, ev.p, view_index)
+    # chunks are time-ordered, so the events before a bound are the sum of each chunk's
+    view_index = before.reshape(n_views, 2)
+    events = None
+    if event_sink is None:
+        ev = EventChunk.concat(chunks)
+        events = Events(ev.x, ev.y, ev.t, ev.p, view_index)
 
     latent_t = tl.latent_times(n_bins)
     latent_c2w = path(latent_t.ravel()).reshape(n_views, n_bins + 1, 4, 4)
@@ -315,7 +341,7 @@ def generate(
         "render_seconds": t_render,
         "simulate_seconds": t_sim,
         "frames_rendered": int(traj_t.size + n_novel),
-        "events": len(events),
+        "events": n_events,
         "events_in_exposures": n_in,
         "max_crossings_per_step": sim.max_crossings_per_step,
         "exposure_crossings_p99": _hist_quantile(exp_hist, 0.99),
@@ -335,7 +361,7 @@ def generate(
     )
     if stats["still_views"]:
         log.info("%s: views held still during their exposure (sharp frames): %s", name, stats["still_views"])
-    return Generated(scene, p, spec, path, caster, novel_c2w, blur_px, stats)
+    return Generated(scene, p, spec, path, caster, novel_c2w, blur_px, view_index, stats)
 
 
 def write_generated(g: Generated, path, *, contact_sheet=None) -> None:
