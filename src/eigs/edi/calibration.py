@@ -154,7 +154,16 @@ def usable_gaps(t_sorted: np.ndarray, exposure_us: np.ndarray) -> np.ndarray:
         return np.zeros(0, bool)
     a = np.searchsorted(t_sorted, exp[:-1, 1], side="left")
     b = np.searchsorted(t_sorted, exp[1:, 0], side="left")
-    ok = (b > a) | (exp[1:, 0] <= exp[:-1, 1])
+    return usable_gaps_from_counts(a, b, exp)
+
+
+def usable_gaps_from_counts(before_end: np.ndarray, before_next: np.ndarray, exposure_us: np.ndarray) -> np.ndarray:
+    """:func:`usable_gaps` from counts alone: ``before_end`` (V − 1,) events with t < end_v, ``before_next``
+    (V − 1,) events with t < start_{v+1} (a view index holds both), so a stream need not be read."""
+    exp = np.asarray(exposure_us, np.int64)
+    if exp.shape[0] < 2:
+        return np.zeros(0, bool)
+    ok = (np.asarray(before_next) > np.asarray(before_end)) | (exp[1:, 0] <= exp[:-1, 1])
     return ok & (exp[1:, 0] > exp[:-1, 0])
 
 

@@ -77,13 +77,15 @@ def run(args: argparse.Namespace) -> int:
 
     from eigs.artifacts.edi import write_edi, write_latent_pngs
     from eigs.edi.pipeline import compute_edi
-    from eigs.scene import read_scene
+    from eigs.scene import EventFile, has_raw_events, read_scene
 
     log = logging.getLogger("eigs.edi")
     t0 = time.perf_counter()
     opts = options(args)
-    scene = read_scene(args.scene, events=args.events, binned=args.events)
-    result = compute_edi(scene, opts, path=args.scene, events=args.events)
+    # the raw events are read a view's window at a time (eigs.edi.pipeline), never all at once
+    scene = read_scene(args.scene, events=False, binned=args.events)
+    source = EventFile(args.scene) if args.events and has_raw_events(args.scene) else None
+    result = compute_edi(scene, opts, path=args.scene, events=args.events, source=source)
     write_edi(result, args.output)
     if args.latent_dir:
         try:

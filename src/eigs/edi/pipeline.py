@@ -5,6 +5,12 @@ per view count the events (views under :data:`SHARP_EVENTS_PER_PIXEL` are copied
 in estimated mode, build the exact exposure integral; estimate the threshold (scene or per view); compute the
 latent frames and store them in the scene's pixel domain. A scene without events (or run with ``events=False``)
 passes every view through as sharp: no binning, no threshold search.
+
+Memory: the raw events come as an :class:`eigs.scene.EventSource` and are read a view's window at a time (the
+whole stream only in chunks, for the hot-pixel rates and the gap counts), and the per-event integrals are kept only
+where a later phase needs them all at once (the threshold's evidence views; the per-pixel calibration's views,
+within :data:`INTEGRAL_BUDGET_BYTES`); the others are rebuilt from their window when their latent frames are made.
+An 800×800 recording of 30 views (~1.8 billion events, 23 GB) is deblurred in a bounded part of that.
 """
 
 from __future__ import annotations
@@ -31,7 +37,7 @@ from eigs.edi.edi import (
 )
 from eigs.edi.options import DEFAULT_BINS, MODES, SCOPES, EdiOptions
 from eigs.errors import EigsError
-from eigs.scene.model import Scene
+from eigs.scene.model import Events, EventSource, Scene
 from eigs.util.progress import progress
 
 log = logging.getLogger(__name__)
@@ -39,37 +45,47 @@ log = logging.getLogger(__name__)
 SHARP_EVENTS_PER_PIXEL = 0.01  # views below this many events per pixel over the exposure are copied
 SEARCH_VIEWS = 12  # at most this many (evenly spaced) views enter the scene-scope threshold energy
 FALLBACK_C = 0.2  # threshold when nothing can be estimated (no view has events)
+# per-pixel calibration: the polarity integrals held at once (~24 bytes per segment, a segment per event and per
+# pixel with events); over it, an evenly spaced subset of the gaps is fitted (no scene of the suite comes near it)
+INTEGRAL_BUDGET_BYTES = 4 << 30
 
 
-def is_e2nerf_scene(scene: Scene) -> bool:
+def is_e2nerf_scene(scene: Scene, raw: bool | None = None) -> bool:
     """Scenes ingested from E²NeRF layouts: the ``source`` attribute starts with E²NeRF's name (``eigs ingest`` writes
     ``e2nerf-synthetic:<folder>`` and ``e2nerf-real:<folder>``), or the events come pre-binned without raw timestamps
     (only E²NeRF's ``events.pt`` provides that). A source that only mentions E²NeRF later is not one: a built-in
     scene whose blur is made as E²NeRF made its blur (``eigs synth … (seed 0, blur e2nerf)``) has our simulator's
-    events and thresholds, and E²NeRF's fixed c = 0.3 would deblur it with the wrong threshold."""
+    events and thresholds, and E²NeRF's fixed c = 0.3 would deblur it with the wrong threshold. ``raw``: whether
+    the scene has raw events (default: ``scene.events`` is there; a scene read without them says so here)."""
     if scene.source.lower().replace("²", "2").replace("-", "").replace("_", "").startswith("e2nerf"):
         return True
-    return scene.binned is not None and scene.events is None
+    return scene.binned is not None and not (scene.events is not None if raw is None else raw)
 
 
-def resolve_mode(scene: Scene, mode: str) -> str:
+def resolve_mode(scene: Scene, mode: str, raw: bool | None = None) -> str:
     if mode not in MODES:
         raise EigsError(None, f"--mode must be one of {MODES}, got {mode!r}")
     if mode == "auto":
-        return "e2nerf" if is_e2nerf_scene(scene) else "estimated"
+        return "e2nerf" if is_e2nerf_scene(scene, raw) else "estimated"
     return mode
 
 
-def _view_slices(path: str, scene: Scene) -> np.ndarray:
-    """(V, 2) int64 [start, stop) offsets of each view's exposure events in ``scene.events``."""
-    ev = scene.events
-    assert ev is not None and scene.frames is not None and scene.frames.exposure_us is not None
-    if ev.view_index is not None:
-        return ev.view_index
+def events_before(source: EventSource, times: np.ndarray) -> np.ndarray:
+    """(K,) int64 number of events with t < times[k] (the stream is time-sorted: the sum of each chunk's)."""
+    times = np.asarray(times, np.int64)
+    out = np.zeros(times.shape, np.int64)
+    for c in source.chunks():
+        out += np.searchsorted(c.t, times, side="left")
+    return out
+
+
+def _view_slices(path: str, scene: Scene, source: EventSource) -> np.ndarray:
+    """(V, 2) int64 [start, stop) offsets of each view's exposure events in ``source``."""
+    assert scene.frames is not None and scene.frames.exposure_us is not None
+    if source.view_index is not None:
+        return np.asarray(source.view_index, np.int64)
     exp = scene.frames.exposure_us
-    return np.stack(
-        [np.searchsorted(ev.t, exp[:, 0], side="left"), np.searchsorted(ev.t, exp[:, 1], side="left")], axis=1
-    ).astype(np.int64)
+    return events_before(source, exp.reshape(-1)).reshape(-1, 2)
 
 
 def choose_latent_times(path: str, scene: Scene, bins: int) -> np.ndarray:
@@ -105,16 +121,39 @@ class _ViewEvents:
 
     cum: np.ndarray  # (V, B + 1, H, W) int32 signed event counts from the first latent time to each latent time
     event_count: np.ndarray  # (V,) int64 events in each view's exposure
-    slices: np.ndarray | None  # (V, 2) int64 [start, stop) of each view's events in scene.events (raw events)
-    integrals: list[ExposureIntegral | None]  # exact exposure integrals (estimated mode, views with events)
+    slices: np.ndarray | None  # (V, 2) int64 [start, stop) of each view's events in the source (raw events)
+    integrals: list[ExposureIntegral | None]  # exact exposure integrals kept (the threshold's evidence views)
     evals: list[tuple[np.ndarray, np.ndarray] | None]  # (eval_counts, rate) for the threshold energy
+    source: EventSource | None = None  # the raw events (None: pre-binned or none)
+    exact: np.ndarray | None = None  # (V,) bool: the view has an exact exposure integral (estimated, with events)
+    times: np.ndarray | None = None  # (V, B + 1) int64 latent times
+    exposure: np.ndarray | None = None  # (V, 2) int64
+    hot: np.ndarray | None = None  # (H, W) bool
+
+    def window(self, v: int) -> Events:
+        """View ``v``'s exposure events, read from the source."""
+        assert self.source is not None and self.slices is not None
+        return self.source.window(int(self.slices[v, 0]), int(self.slices[v, 1]))
+
+    def integral(self, v: int) -> ExposureIntegral | None:
+        """View ``v``'s exact exposure integral: the kept one, else built from its window; None without one."""
+        if self.integrals[v] is not None or self.exact is None or not self.exact[v]:
+            return self.integrals[v]
+        assert self.times is not None and self.exposure is not None and self.hot is not None
+        e = self.window(v)
+        s, t_end = (int(u) for u in self.exposure[v])
+        h, w = self.hot.shape
+        return ExposureIntegral(e.x, e.y, e.t, e.p, s, t_end, int(self.times[v, 0]), h, w, self.hot)
 
 
-def compute_edi(scene: Scene, opts: EdiOptions, path: str = "", *, events: bool = True) -> EdiResult:
+def compute_edi(
+    scene: Scene, opts: EdiOptions, path: str = "", *, events: bool = True, source: EventSource | None = None
+) -> EdiResult:
     """Run EDI on every view of ``scene``. ``path`` names the scene file in error messages. ``events=False``
     (``eigs edi --no-events``, the workflow's ``edi_frames`` job for a scene configured with ``events: false``)
     ignores the scene's raw and pre-binned events: the result is the one of the same scene without events, every
-    view passed through as sharp (:func:`without_events`).
+    view passed through as sharp (:func:`without_events`). ``source``: the raw events when ``scene`` was read
+    without them (``eigs edi`` passes the file's :class:`eigs.scene.EventFile`); default ``scene.events``.
 
     Phases: check the options → bins and latent times → hot-pixel mask → per-view events → sharp views →
     threshold → per-pixel thresholds → latent frames.
@@ -122,10 +161,12 @@ def compute_edi(scene: Scene, opts: EdiOptions, path: str = "", *, events: bool 
     path = path or scene.name
     scene.require("frames", path=path)
     assert scene.frames is not None
+    if source is None:
+        source = scene.events
     if not events:
-        scene = without_events(scene)
-    mode = _check_options(scene, opts)
-    raw = scene.events is not None and len(scene.events) > 0
+        scene, source = without_events(scene), None
+    raw = source is not None and len(source) > 0
+    mode = _check_options(scene, opts, source is not None)
     prebinned = scene.binned is not None and not raw
     bins, times = _bins_and_times(path, scene, opts, raw, prebinned)
     if not raw and not prebinned:
@@ -133,17 +174,17 @@ def compute_edi(scene: Scene, opts: EdiOptions, path: str = "", *, events: bool 
             log.warning("the scene has no events: every view is passed through as sharp")
         else:
             log.info("events not used (--no-events): every view is passed through as sharp")
-    hot = _hot_pixel_mask(scene, opts, mode, raw, prebinned)
+    hot = _hot_pixel_mask(scene, source, opts, mode, raw, prebinned)
     # instantaneous frames (no exposure windows) have no events inside them: zero counts, passed through
     in_exposures = raw and scene.frames.exposure_us is not None
-    ve = _view_events(path, scene, opts, mode, bins, times, hot, in_exposures, prebinned)
+    ve = _view_events(path, scene, source if in_exposures else None, opts, mode, bins, times, hot, prebinned)
     h, w = scene.frames.blurry.shape[1:3]
     sharp, active = _sharp_views(ve.event_count, h, w)
     lin = _linear_frames(scene, mode, active)
     thresholds, scope = _thresholds(scene, opts, mode, ve, lin, active)
     maps = None
     if mode == "estimated" and opts.per_pixel_threshold:
-        maps = _per_pixel_thresholds(scene, opts, thresholds, ve.slices, hot, active)
+        maps = _per_pixel_thresholds(scene, opts, thresholds, ve, active)
     latent, extent = _latent_frames(scene, opts, mode, times, ve, lin, thresholds, sharp, maps, hot)
     c_pos_map, c_neg_map, _ = maps if maps is not None else (None, None, {})
     return EdiResult(
@@ -164,9 +205,9 @@ def compute_edi(scene: Scene, opts: EdiOptions, path: str = "", *, events: bool 
     )
 
 
-def _check_options(scene: Scene, opts: EdiOptions) -> str:
+def _check_options(scene: Scene, opts: EdiOptions, raw: bool) -> str:
     """The resolved mode; raises :class:`EigsError` for an unknown scope or an implausible threshold."""
-    mode = resolve_mode(scene, opts.mode)
+    mode = resolve_mode(scene, opts.mode, raw)
     if opts.threshold_scope not in SCOPES:
         raise EigsError(None, f"--threshold-scope must be one of {SCOPES}, got {opts.threshold_scope!r}")
     if opts.threshold is not None and not (thr.C_MIN / 100 <= opts.threshold <= 10):
@@ -203,15 +244,19 @@ def _bins_and_times(
     return bins, times
 
 
-def _hot_pixel_mask(scene: Scene, opts: EdiOptions, mode: str, raw: bool, prebinned: bool) -> np.ndarray:
+def _hot_pixel_mask(
+    scene: Scene, source: EventSource | None, opts: EdiOptions, mode: str, raw: bool, prebinned: bool
+) -> np.ndarray:
     """(H, W) bool hot-pixel / flicker mask (estimated mode only: the E²NeRF mode reproduces E²NeRF exactly)."""
     assert scene.frames is not None
     h, w = scene.frames.blurry.shape[1:3]
     if mode != "estimated" or opts.mask_top <= 0:
         return np.zeros((h, w), dtype=bool)
     if raw:
-        assert scene.events is not None
-        rate = mask_mod.event_rate_map(scene.events.x, scene.events.y, h, w)
+        assert source is not None
+        rate = np.zeros((h, w), np.int64)
+        for c in source.chunks():
+            rate += mask_mod.event_rate_map(c.x, c.y, h, w)
     elif prebinned:
         assert scene.binned is not None
         rate = np.abs(scene.binned.counts).sum(axis=(0, 1))
@@ -222,46 +267,66 @@ def _hot_pixel_mask(scene: Scene, opts: EdiOptions, mode: str, raw: bool, prebin
     return hot
 
 
+def _evidence_views(opts: EdiOptions, active: np.ndarray) -> np.ndarray:
+    """The views whose evidence the threshold estimate reads: none with a given threshold, at most
+    :data:`SEARCH_VIEWS` evenly spaced ones per scene, every active one per view."""
+    if opts.threshold is not None or active.size == 0:
+        return np.zeros(0, np.int64)
+    if opts.threshold_scope != "scene":
+        return active
+    idx = np.unique(np.linspace(0, active.size - 1, min(SEARCH_VIEWS, active.size)).round().astype(int))
+    return active[idx]
+
+
 def _view_events(
     path: str,
     scene: Scene,
+    source: EventSource | None,
     opts: EdiOptions,
     mode: str,
     bins: int,
     times: np.ndarray,
     hot: np.ndarray,
-    raw: bool,
     prebinned: bool,
 ) -> _ViewEvents:
-    """Per view: count the events, bin them at the latent times and, in estimated mode, build the exact exposure
-    integral and the threshold-energy maps (views under :data:`SHARP_EVENTS_PER_PIXEL` get neither)."""
+    """Per view: count the events, bin them at the latent times and, in estimated mode, for the threshold's evidence
+    views (:func:`_evidence_views`), build the exact exposure integral and the threshold-energy maps (views under
+    :data:`SHARP_EVENTS_PER_PIXEL` get neither; the others' integrals are built again when their latent frames are
+    made, :meth:`_ViewEvents.integral`). ``source``: the raw events of a scene with exposures, else None."""
     assert scene.frames is not None
     v_n, h, w = scene.frames.blurry.shape[:3]
     cum = np.zeros((v_n, bins + 1, h, w), np.int32)
     event_count = np.zeros(v_n, np.int64)
-    slices = _view_slices(path, scene) if raw else None
+    slices = _view_slices(path, scene, source) if source is not None else None
     integrals: list[ExposureIntegral | None] = [None] * v_n
     evals: list[tuple[np.ndarray, np.ndarray] | None] = [None] * v_n
+    exact = None
+    keep: set[int] = set()
+    if slices is not None:
+        event_count[:] = slices[:, 1] - slices[:, 0]
+        if mode == "estimated":
+            exact = event_count >= SHARP_EVENTS_PER_PIXEL * h * w
+            keep = {int(v) for v in _evidence_views(opts, np.flatnonzero(exact))}
+    ve = _ViewEvents(cum, event_count, slices, integrals, evals, source, exact, times,
+                     scene.frames.exposure_us, hot)
     views = range(v_n)
     for v in progress(views, desc="edi: bin events", total=v_n, unit="view") if opts.show_progress else views:
-        if raw:
-            assert scene.events is not None and slices is not None and scene.frames.exposure_us is not None
-            a, b = int(slices[v, 0]), int(slices[v, 1])
-            ev = scene.events
-            x, y, t, p = ev.x[a:b], ev.y[a:b], ev.t[a:b], ev.p[a:b]
-            event_count[v] = b - a
+        if slices is not None:
+            assert scene.frames.exposure_us is not None
+            e = ve.window(v)
+            x, y, t, p = e.x, e.y, e.t, e.p
             cum[v] = binning.cumulative_counts(binning.bin_events(x, y, t, p, times[v], h, w, hot))
-            if mode == "estimated" and event_count[v] >= SHARP_EVENTS_PER_PIXEL * h * w:
-                s, e = (int(u) for u in scene.frames.exposure_us[v])
-                integrals[v] = ExposureIntegral(x, y, t, p, s, e, int(times[v, 0]), h, w, hot)
-                evals[v] = _eval_maps(x, y, t, p, s, e, int(times[v, 0]), bins + 1, h, w, hot)
+            if v in keep:
+                s, end = (int(u) for u in scene.frames.exposure_us[v])
+                integrals[v] = ExposureIntegral(x, y, t, p, s, end, int(times[v, 0]), h, w, hot)
+                evals[v] = _eval_maps(x, y, t, p, s, end, int(times[v, 0]), bins + 1, h, w, hot)
         elif prebinned:
             assert scene.binned is not None
             counts = np.where(hot[None], 0, scene.binned.counts[v])
             event_count[v] = int(np.abs(scene.binned.counts[v]).astype(np.int64).sum())
             cum[v] = binning.cumulative_counts(counts)
             evals[v] = _eval_maps_binned(counts)
-    return _ViewEvents(cum, event_count, slices, integrals, evals)
+    return ve
 
 
 def _sharp_views(event_count: np.ndarray, h: int, w: int) -> tuple[np.ndarray, np.ndarray]:
@@ -361,12 +426,10 @@ def _latent_frames(
             lat = edi_e2nerf(blurry[v], ve.cum[v], c)
             latent[v] = (np.clip(lat, 0.0, 255.0) / 255.0).astype(np.float32)
         else:
-            if v in pol_ints:
-                lat = _latent_per_pixel(
-                    scene, v, times[v], lin[v], pol_ints[v], c_pos_map, c_neg_map, ve.slices, hot
-                )
-            elif ve.integrals[v] is not None:
-                lat = edi_continuous(lin[v], ve.cum[v], ve.integrals[v].log_mean_exp(c), c)
+            if c_pos_map is not None and c_neg_map is not None:
+                lat = _latent_per_pixel(scene, v, times[v], lin[v], pol_ints.get(v), c_pos_map, c_neg_map, ve, hot)
+            elif (integral := ve.integral(v)) is not None:
+                lat = edi_continuous(lin[v], ve.cum[v], integral.log_mean_exp(c), c)
             else:
                 lat = edi_discrete(lin[v], ve.cum[v], c)
             latent[v] = from_linear(np.clip(lat, 0.0, 1.0), scene.camera_response).astype(np.float32)
@@ -374,16 +437,39 @@ def _latent_frames(
     return latent, extent
 
 
+def _calibration_gaps(gaps: np.ndarray, event_count: np.ndarray, hw: int) -> np.ndarray:
+    """(V − 1,) bool: the usable ``gaps`` whose two views' polarity integrals fit :data:`INTEGRAL_BUDGET_BYTES`
+    together: all of them when they fit, else the most evenly spaced ones that do."""
+    n = event_count.astype(np.int64)
+    per_view = 24 * (n + np.minimum(n, hw)) + 24 * np.minimum(n, hw)  # segments, then per-pixel arrays
+
+    def cost(sel: np.ndarray) -> int:
+        return int(per_view[np.unique(np.concatenate([sel, sel + 1]))].sum()) if sel.size else 0
+
+    usable = np.flatnonzero(gaps)
+    for k in range(usable.size, 0, -1):
+        sel = usable[np.unique(np.linspace(0, usable.size - 1, k).round().astype(int))]
+        if cost(sel) <= INTEGRAL_BUDGET_BYTES:
+            out = np.zeros_like(gaps)
+            out[sel] = True
+            if k < usable.size:
+                log.info("per-pixel calibration: %d of %d gaps (their integrals, %.1f GB, within the %.1f GB budget; "
+                         "all would take %.1f GB)", sel.size, usable.size, cost(sel) / 1e9,
+                         INTEGRAL_BUDGET_BYTES / 1e9, cost(usable) / 1e9)
+            return out
+    return np.zeros_like(gaps)
+
+
 def _per_pixel_thresholds(
     scene: Scene,
     opts: EdiOptions,
     thresholds: np.ndarray,
-    slices: np.ndarray | None,
-    hot: np.ndarray,
+    ve: _ViewEvents,
     active: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, dict[int, cal.PolarityIntegral]] | None:
     """Per-pixel (c⁺, c⁻) maps from the gap constraints (:mod:`eigs.edi.calibration`) and the per-view
-    polarity integrals the latent frames need; None (global threshold, logged) when the data cannot support them."""
+    polarity integrals built for them (the latent frames build the others); None (global threshold, logged) when
+    the data cannot support them."""
     import time
 
     def fallback(why: str) -> None:
@@ -392,10 +478,11 @@ def _per_pixel_thresholds(
     if opts.threshold is not None:
         fallback("threshold given")
         return None
-    ev, frames = scene.events, scene.frames
-    if ev is None or len(ev) == 0 or slices is None or frames is None or frames.exposure_us is None:
+    src, slices, frames, hot = ve.source, ve.slices, scene.frames, ve.hot
+    if src is None or len(src) == 0 or slices is None or frames is None or frames.exposure_us is None:
         fallback("no raw events")
         return None
+    assert hot is not None
     if active.size == 0:
         fallback("no view has events")
         return None
@@ -404,19 +491,30 @@ def _per_pixel_thresholds(
     if not np.all(np.diff(exp[:, 0]) > 0):
         fallback("exposure starts not increasing")
         return None
-    gaps = cal.usable_gaps(ev.t, exp)
+    # gap v has events when some event lies in [end_v, start_{v+1}): the slices count the events before each bound
+    gaps = cal.usable_gaps_from_counts(slices[:-1, 1], slices[1:, 0], exp)
     if int(gaps.sum()) < cal.MIN_GAPS:
         fallback(f"{int(gaps.sum())} exposure gaps with events, at least {cal.MIN_GAPS} needed")
         return None
     v_n = exp.shape[0]
     h, w = frames.blurry.shape[1:3]
+    gaps = _calibration_gaps(gaps, ve.event_count, h * w)
+    if int(gaps.sum()) < cal.MIN_GAPS:
+        fallback(f"the integrals of {cal.MIN_GAPS} gaps exceed the memory budget")
+        return None
     c0 = float(np.median(thresholds[active]))
-    ints = []
-    for v in range(v_n):
-        a, b = int(slices[v, 0]), int(slices[v, 1])
-        ints.append(cal.PolarityIntegral(ev.x[a:b], ev.y[a:b], ev.t[a:b], ev.p[a:b], exp[v, 0], exp[v, 1], h, w, hot))
+    need = np.flatnonzero(np.concatenate([gaps, [False]]) | np.concatenate([[False], gaps]))
+    ints: list[cal.PolarityIntegral | None] = [None] * v_n
+    for v in need:
+        e = ve.window(int(v))
+        ints[v] = cal.PolarityIntegral(e.x, e.y, e.t, e.p, exp[v, 0], exp[v, 1], h, w, hot)
     # events from start_v to start_{v+1} (the exposure and the gap); the starts must increase for the binning
-    n_pos, n_neg = binning.polarity_counts(ev.x, ev.y, ev.t, ev.p, exp[:, 0], h, w, hot)
+    n_pos = np.zeros((v_n - 1, h, w), np.int64)
+    n_neg = np.zeros((v_n - 1, h, w), np.int64)
+    for c in src.chunks():
+        on, off = binning.polarity_counts(c.x, c.y, c.t, c.p, exp[:, 0], h, w, hot)
+        n_pos += on
+        n_neg += off
     bsat = [cal.log_luma_and_sigma(frames.blurry[v], scene.camera_response) for v in range(v_n)]
     b, sigma_b, sat = (np.stack(z) for z in zip(*bsat, strict=True))
     res = cal.calibrate(b, sigma_b, sat, ints, n_pos, n_neg, gaps, c0, mask=hot)
@@ -431,7 +529,7 @@ def _per_pixel_thresholds(
         res.n_gaps, qp[1], qp[0], qp[2], qn[1], qn[0], qn[2], *res.pooled, c0,
         res.residual_before, res.residual_after, time.perf_counter() - t0,
     )
-    return res.c_pos, res.c_neg, {int(v): ints[v] for v in active}
+    return res.c_pos, res.c_neg, {int(v): ints[v] for v in active if ints[v] is not None}
 
 
 def _latent_per_pixel(
@@ -439,19 +537,21 @@ def _latent_per_pixel(
     v: int,
     times: np.ndarray,
     lin: np.ndarray,
-    integral: cal.PolarityIntegral,
+    integral: cal.PolarityIntegral | None,
     c_pos: np.ndarray,
     c_neg: np.ndarray,
-    slices: np.ndarray | None,
+    ve: _ViewEvents,
     hot: np.ndarray,
 ) -> np.ndarray:
-    """(L, H, W, C) linear latent frames of view ``v`` with the per-pixel maps (reference = exposure start)."""
-    assert scene.events is not None and slices is not None and scene.frames is not None
-    assert scene.frames.exposure_us is not None
-    ev = scene.events
-    a, b = int(slices[v, 0]), int(slices[v, 1])
-    start = int(scene.frames.exposure_us[v, 0])
-    s_pos, s_neg = cal.counts_before(ev.x[a:b], ev.y[a:b], ev.t[a:b], ev.p[a:b], start, times, *lin.shape[:2], hot)
+    """(L, H, W, C) linear latent frames of view ``v`` with the per-pixel maps (reference = exposure start);
+    ``integral``: its polarity integral when the calibration kept it, else built here from its window."""
+    assert scene.frames is not None and scene.frames.exposure_us is not None
+    e = ve.window(v)
+    start, end = (int(u) for u in scene.frames.exposure_us[v])
+    h, w = lin.shape[:2]
+    if integral is None:
+        integral = cal.PolarityIntegral(e.x, e.y, e.t, e.p, start, end, h, w, hot)
+    s_pos, s_neg = cal.counts_before(e.x, e.y, e.t, e.p, start, times, h, w, hot)
     return cal.edi_per_pixel(lin, s_pos, s_neg, integral.log_mean_exp(c_pos, c_neg), c_pos, c_neg)
 
 

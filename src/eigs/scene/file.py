@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -364,6 +365,60 @@ def read_events(path: str | os.PathLike, start: int = 0, stop: int | None = None
             )
         except H5_READ_ERRORS as err:
             raise EigsError(path, f"corrupted scene file, unreadable events ({err})") from None
+
+
+class EventFile:
+    """A scene file's raw events, read by windows (:class:`eigs.scene.model.EventSource`): memory holds a window,
+    never the recording. ``view_index``: (V, 2) int64 or None; ``len()``: the event count.
+
+    Checked as :func:`read_scene` checks them, by parts: on opening the arrays' dtypes and lengths and the view
+    index (against the exposures, from its 2V boundary events); each window as it is read (range, polarity, time
+    order; across the windows of :meth:`chunks` as well)."""
+
+    READ_ROWS = 16 * EVENT_CHUNK_ROWS  # events per window of :meth:`chunks` (~200 MB)
+
+    def __init__(self, path: str | os.PathLike):
+        self.path = Path(path)
+        p = str(path)
+        with _open_read(path) as f:
+            if "events/t" not in f:
+                raise EigsError(path, "the scene has no raw events")
+            try:
+                ds = {k: f[f"events/{k}"] for k in ("x", "y", "t", "p")}
+                n = int(ds["t"].shape[0])
+                for k, dt in (("x", np.uint16), ("y", np.uint16), ("t", np.int64), ("p", np.int8)):
+                    if ds[k].dtype != np.dtype(dt):
+                        raise EigsError(path, f"events/{k} has dtype {ds[k].dtype}, expected {np.dtype(dt)}")
+                    if ds[k].shape != (n,):
+                        raise EigsError(path, f"events/{k} has {ds[k].shape[0]} entries but events/t has {n}")
+                self._width = int(f["camera"].attrs["width"])
+                self._height = int(f["camera"].attrs["height"])
+                self.view_index = _opt(f, "events/view_index")
+                if self.view_index is not None:
+                    exposure = _opt(f, "frames/exposure_us")
+                    check_view_index_sorted(p, self.view_index, n, ds["t"], exposure, self.view_index.shape[0])
+            except H5_READ_ERRORS as err:
+                raise EigsError(path, f"corrupted scene file, unreadable events ({err})") from None
+        self._n = n
+
+    def __len__(self) -> int:
+        return self._n
+
+    def _read(self, start: int, stop: int, last_t: int | None) -> tuple[Events, int | None]:
+        ev = read_events(self.path, start, stop)
+        ev.view_index = None
+        last = check_event_chunk(str(self.path), ev.x, ev.y, ev.t, ev.p, self._width, self._height, last_t)
+        return ev, last
+
+    def window(self, start: int, stop: int) -> Events:
+        return self._read(start, stop, None)[0]
+
+    def chunks(self, rows: int | None = None) -> Iterator[Events]:
+        step = max(int(rows or self.READ_ROWS), 1)
+        last = None
+        for a in range(0, self._n, step):
+            ev, last = self._read(a, min(a + step, self._n), last)
+            yield ev
 
 
 def event_count(path: str | os.PathLike) -> int:

@@ -8,7 +8,9 @@ refuses with a clear message (:meth:`Scene.require`).
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 
@@ -73,18 +75,41 @@ class Events:
     def __len__(self) -> int:
         return int(self.t.shape[0])
 
+    def window(self, start: int, stop: int) -> Events:
+        """Events ``[start, stop)`` by index (array views, no copy; no view index)."""
+        return Events(self.x[start:stop], self.y[start:stop], self.t[start:stop], self.p[start:stop])
+
     def view(self, v: int) -> Events:
-        """View ``v``'s exposure events: the slice ``view_index[v]`` (a view, no copy; its own index is None)."""
+        """View ``v``'s exposure events: the window ``view_index[v]``."""
         if self.view_index is None:
             raise ValueError("these events have no view index")
-        a, b = (int(k) for k in self.view_index[v])
-        return Events(self.x[a:b], self.y[a:b], self.t[a:b], self.p[a:b])
+        return self.window(*(int(k) for k in self.view_index[v]))
+
+    def chunks(self, rows: int | None = None) -> Iterator[Events]:
+        """The events in time order, in windows of ``rows`` (None: one window, all of them)."""
+        n = len(self)
+        step = max(int(rows or n), 1)
+        for a in range(0, n, step):
+            yield self.window(a, min(a + step, n))
 
     @staticmethod
     def empty() -> Events:
         return Events(
             np.zeros(0, np.uint16), np.zeros(0, np.uint16), np.zeros(0, np.int64), np.zeros(0, np.int8)
         )
+
+
+class EventSource(Protocol):
+    """Raw events read by windows: :class:`Events` in memory, or :class:`eigs.scene.file.EventFile` (a scene file's
+    events, never all in memory). A stage that may meet a recording larger than memory takes one of these."""
+
+    view_index: np.ndarray | None
+
+    def __len__(self) -> int: ...
+
+    def window(self, start: int, stop: int) -> Events: ...
+
+    def chunks(self, rows: int | None = None) -> Iterator[Events]: ...
 
 
 @dataclass
