@@ -47,7 +47,7 @@ SEARCH_VIEWS = 12  # at most this many (evenly spaced) views enter the scene-sco
 FALLBACK_C = 0.2  # threshold when nothing can be estimated (no view has events)
 # per-pixel calibration: the polarity integrals held at once (~24 bytes per segment, a segment per event and per
 # pixel with events); over it, an evenly spaced subset of the gaps is fitted (no scene of the suite comes near it)
-INTEGRAL_BUDGET_BYTES = 4 << 30
+INTEGRAL_BUDGET_BYTES = 6 << 30
 
 
 def is_e2nerf_scene(scene: Scene, raw: bool | None = None) -> bool:
@@ -184,6 +184,8 @@ def compute_edi(
     thresholds, scope = _thresholds(scene, opts, mode, ve, lin, active)
     maps = None
     if mode == "estimated" and opts.per_pixel_threshold:
+        # the evidence's exposure integrals have served; with per-pixel maps the latent frames do not read them
+        ve.integrals[:] = [None] * len(ve.integrals)
         maps = _per_pixel_thresholds(scene, opts, thresholds, ve, active)
     latent, extent = _latent_frames(scene, opts, mode, times, ve, lin, thresholds, sharp, maps, hot)
     c_pos_map, c_neg_map, _ = maps if maps is not None else (None, None, {})
