@@ -64,3 +64,25 @@ def test_scene_info_and_validate(tmp_path, capsys):
     assert "scene 'unit'" in capsys.readouterr().out
     assert main(["scene", "validate", str(path)]) == 0
     assert "valid eigs scene" in capsys.readouterr().out
+
+
+def test_scene_info_and_validate_read_the_events_by_chunks(tmp_path, capsys, monkeypatch):
+    """`eigs scene` reads the raw events a chunk at a time: the summary equals the one of the scene in memory, and a
+    damaged event in a late chunk is found and named."""
+    import h5py
+
+    from eigs.scene import EventFile, summarize, write_scene
+    from tests.scene.test_scene_file import make_scene
+
+    scene = make_scene()
+    path = tmp_path / "s.h5"
+    write_scene(scene, path)
+    monkeypatch.setattr(EventFile, "READ_ROWS", 3)
+    assert len(scene.events) > 6
+    assert main(["scene", "info", str(path)]) == 0
+    assert capsys.readouterr().out.strip() == summarize(scene).strip()
+    with h5py.File(path, "a") as f:
+        f["events/p"][len(scene.events) - 1] = 0
+    for action in ("info", "validate"):
+        assert main(["scene", action, str(path)]) == 2
+        assert "events/p must be ±1" in capsys.readouterr().err

@@ -15,11 +15,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from eigs.scene import read_scene, summarize
+    from eigs.scene import EventFile, has_raw_events, read_scene, summarize
 
-    scene = read_scene(args.scene)
+    # the header whole, the raw events a chunk at a time (checked as they are read): a recording larger than
+    # memory is inspected and validated in bounded memory
+    scene = read_scene(args.scene, events=False)
+    events = EventFile(args.scene) if has_raw_events(args.scene) else None
+    if events is not None and args.action == "validate":
+        for _ in events.chunks():
+            pass
     if args.action == "info":
-        print(summarize(scene))
+        print(summarize(scene, events=events))
     else:
         print(f"{args.scene}: valid eigs scene")
     return 0

@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from eigs.scene.model import SHARP_KIND_BLUR_VIEW, Scene
+from eigs.scene.model import SHARP_KIND_BLUR_VIEW, EventSource, Scene
 
 
-def summarize(scene: Scene, dropped_events: int = 0) -> str:
-    """Views, events, event rate, time span, polarity balance, dropped events, ground truth."""
+def summarize(scene: Scene, dropped_events: int = 0, events: EventSource | None = None) -> str:
+    """Views, events, event rate, time span, polarity balance, dropped events, ground truth. ``events``: the raw
+    events when ``scene`` was read without them (read in chunks; default ``scene.events``)."""
     cam = scene.camera
     lines = [
         f"scene {scene.name!r}: {'synthetic' if scene.synthetic else 'real'}, {cam.width}×{cam.height}, "
@@ -30,13 +31,17 @@ def summarize(scene: Scene, dropped_events: int = 0) -> str:
     if scene.frames is not None and scene.frames.exposure_us is not None and scene.n_views:
         dur = np.diff(scene.frames.exposure_us, axis=1)[:, 0]
         lines.append(f"  exposure: median {np.median(dur) / 1e3:.3f} ms")
-    ev = scene.events
+    ev = events if events is not None else scene.events
     if ev is not None and len(ev):
-        span = max(int(ev.t[-1] - ev.t[0]), 1)
-        pos = int(np.count_nonzero(ev.p > 0))
+        pos, first, last = 0, None, 0
+        for c in ev.chunks():
+            pos += int(np.count_nonzero(c.p > 0))
+            first = int(c.t[0]) if first is None else first
+            last = int(c.t[-1])
+        span = max(last - int(first or 0), 1)
         lines.append(
             f"  events: {len(ev):,} over {span / 1e6:.6f} s ({len(ev) / (span / 1e6):,.0f} ev/s), "
-            f"t = [{int(ev.t[0])}, {int(ev.t[-1])}] µs, positive {100.0 * pos / len(ev):.1f} %"
+            f"t = [{first}, {last}] µs, positive {100.0 * pos / len(ev):.1f} %"
         )
     elif ev is not None:
         lines.append("  events: none")
