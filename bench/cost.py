@@ -17,6 +17,13 @@ from the smaller sizes alone, scales it to 8 and 16 threads by the step-time rat
 machine (``--scaling``), and predicts a run's training time, EDI and SfM at the E²NeRF synthetic size (800×800,
 100 views); writes the "cost" section of docs/benchmarks.md and docs/figures/bench_cost.png.
 
+``measured``: a finished (or running) workflow at the target size (config/size800.yaml) against that model: each
+stage's wall and CPU time and peak memory from its Snakemake benchmark; per training run the step time of every
+logged interval of its ``train_log.csv`` (intervals that held a held-out evaluation left out) against the model's
+step time at that interval's Gaussian count (the fitted counts' lines interpolated in log count), the Gaussian
+count, and the step at which the held-out PSNR first came within 0.3 dB of its best (its plateau); EDI and SfM
+against the upstream power laws. Prints the section's tables (Markdown) and writes them as JSON with ``--json``.
+
 Run: ``.venv/bin/python bench/cost.py steps --results results/d346-chair --config config/davis346.yaml
 --runs 3dgs,edi-3dgs,eigs+ --sizes 128x96,346x260 --gaussians 20000 --threads 1,2 -o cost.jsonl``;
 ``bench/cost.py upstream --scene chair --shapes 128x96:24,256x192:24,346x260:30,128x96:100 --work /tmp/cost
@@ -222,6 +229,126 @@ def thread_ratios(d: list[dict], threads: int, target_p: float) -> dict[int, flo
     return out
 
 
+def step_at(lines: dict[int, tuple[float, float]], gaussians: float, p: float) -> float:
+    """The model's step seconds at ``gaussians`` and ``p`` megapixels: ``lines`` {count: (a, b)} (t = a + b·P),
+    interpolated linearly in log count between the two fitted counts around it, the nearest line's outside them."""
+    import numpy as np
+
+    counts = sorted(lines)
+    t = [lines[c][0] + lines[c][1] * p for c in counts]
+    return float(np.interp(np.log(max(gaussians, 1.0)), np.log(counts), t))
+
+
+def plateau_step(rows: list[dict], tolerance_db: float = 0.3) -> tuple[int, float] | None:
+    """(step, PSNR) where the held-out PSNR of ``train_log.csv`` rows first came within ``tolerance_db`` of its
+    best; None without evaluations."""
+    curve = [(int(r["step"]), float(r["psnr_novel"])) for r in rows if r.get("psnr_novel") not in (None, "")]
+    if not curve:
+        return None
+    best = max(v for _, v in curve)
+    return next((s, v) for s, v in curve if v >= best - tolerance_db)
+
+
+def step_intervals(rows: list[dict]) -> list[tuple[int, float, int]]:
+    """(steps, seconds per step, Gaussians at its start) of every logged interval of ``train_log.csv`` rows whose
+    end row holds no held-out evaluation (those intervals include it)."""
+    out = []
+    for prev, row in zip(rows, rows[1:], strict=False):
+        if row.get("psnr_novel") not in (None, ""):
+            continue
+        ds = int(row["step"]) - int(prev["step"])
+        if ds > 0:
+            out.append((ds, (float(row["wall_s"]) - float(prev["wall_s"])) / ds, int(prev["n_gaussians"])))
+    return out
+
+
+def _benchmark(path: Path) -> dict | None:
+    import csv
+
+    if not path.exists():
+        return None
+    rows = list(csv.DictReader(path.read_text().splitlines(), delimiter="\t"))
+    return {"wall_s": float(rows[-1]["s"]), "cpu_s": float(rows[-1]["cpu_time"]),
+            "max_rss_gb": float(rows[-1]["max_rss"]) / 1024} if rows else None  # fmt: skip
+
+
+def measured(args: argparse.Namespace) -> None:
+    import csv
+
+    import numpy as np
+
+    from bench._report import table
+
+    d, scene, b = Path(args.directory), args.scene, args.bins
+    cfg = merged_config([Path(c) for c in args.config])
+    spec = cfg["scenes"][scene]
+    over = spec.get("overrides", {})
+    w, h, views = int(over["width"]), int(over["height"]), int(over["n_train"])
+    p = w * h / 1e6
+    recs = [r for r in read_jsonl(args.steps) if r["threads"] == args.threads]
+    up = read_jsonl(args.upstream) if args.upstream else []
+    frames = views * (b + 1)
+    predicted: dict[str, float] = {}
+    if up:
+        k_e, a_e = power_law(np.array([r["frames"] * r["width"] * r["height"] / 1e6 for r in up]),
+                             [r["edi_s"] for r in up])  # fmt: skip
+        k_s, a_s = power_law(np.array([r["frames"] for r in up], float), [r["sfm_s"] for r in up])
+        predicted = {"edi": k_e * (frames * p) ** a_e, "sfm": k_s * frames**a_s}
+    out: dict = {"scene": scene, "size": [w, h], "views": views, "stages": {}, "runs": {}}
+    stage_rows = []
+    for rule, name in (("synth", scene), ("edi", f"{scene}_b{b}"), ("sfm", f"{scene}_b{b}"), ("init", f"{scene}_b{b}"),
+                       *((("train", f"{scene}_b{b}_{r}")) for r in args.runs),
+                       *((("evaluate", f"{scene}_b{b}_{r}")) for r in args.runs)):  # fmt: skip
+        m = _benchmark(d / "benchmarks" / rule / f"{name}.tsv")
+        key = rule if rule in ("synth", "edi", "sfm", "init") else f"{rule} {name.rsplit('_', 1)[-1]}"
+        out["stages"][key] = m
+        pred = predicted.get(rule)
+        stage_rows.append([key, "–" if m is None else f"{m['wall_s'] / 60:.1f}",
+                           "–" if m is None else f"{m['cpu_s'] / 60:.1f}",
+                           "–" if m is None else f"{m['max_rss_gb']:.1f}",
+                           "–" if pred is None else f"{pred / 60:.1f}",
+                           "–" if pred is None or m is None
+                           else f"{100 * (pred / m['wall_s'] - 1):+.0f} %"])  # fmt: skip
+    run_rows = []
+    for run in args.runs:
+        log = d / "results" / scene / f"b{b}" / run / "train_log.csv"
+        if not log.exists():
+            run_rows.append([run] + ["–"] * 8)
+            continue
+        rows = list(csv.DictReader(log.read_text().splitlines()))
+        lines = {}
+        for g in sorted({r["gaussians"] for r in recs if r["run"] == run}):
+            rr = [r for r in recs if r["run"] == run and r["gaussians"] == g]
+            lines[g] = fit_linear([r["width"] * r["height"] / 1e6 for r in rr], [r["step_s"] for r in rr])
+        iv = step_intervals(rows)
+        meas = np.array([t for _, t, _ in iv])
+        pred = np.array([step_at(lines, g, p) for _, _, g in iv]) if lines else np.full(len(iv), np.nan)
+        ratio = float(np.median(pred / meas)) if len(iv) else float("nan")
+        plateau = plateau_step(rows)
+        gauss = [int(r["n_gaussians"]) for r in rows]
+        steps = int(rows[-1]["step"]) if rows else 0
+        model_train_s = float(sum(ds * t for (ds, _, _), t in zip(iv, pred, strict=True)) / max(sum(
+            ds for ds, _, _ in iv), 1) * steps) if len(iv) else float("nan")
+        out["runs"][run] = {"steps": steps, "gaussians_final": gauss[-1] if gauss else 0,
+                            "gaussians_max": max(gauss) if gauss else 0,
+                            "step_ms_median": float(np.median(meas) * 1e3) if len(iv) else None,
+                            "model_over_measured": ratio, "plateau": plateau,
+                            "model_train_s": model_train_s}  # fmt: skip
+        run_rows.append([run, steps, f"{gauss[-1]:,}" if gauss else "–", f"{max(gauss):,}" if gauss else "–",
+                         f"{np.median(meas) * 1e3:.0f}" if len(iv) else "–",
+                         f"{np.median(pred) * 1e3:.0f}" if len(iv) else "–",
+                         f"{100 * (ratio - 1):+.0f} %" if len(iv) else "–",
+                         "–" if plateau is None else f"{plateau[0]} ({plateau[1]:.2f} dB)",
+                         f"{model_train_s / 60:.0f}" if len(iv) else "–"])  # fmt: skip
+    print(f"{scene}: {w}×{h}, {views} views, B = {b} ({frames} latent frames)\n")
+    print(table(["stage", "wall min", "CPU min", "peak GB", "model min", "model error"], stage_rows))
+    print()
+    print(table(["run", "steps", "Gaussians (end)", "Gaussians (max)", "ms/step measured", "ms/step model",
+                 "model error", "plateau step (PSNR)", "model min of training"], run_rows))  # fmt: skip
+    if args.json:
+        Path(args.json).write_text(json.dumps(out, indent=1) + "\n")
+
+
 def model(args: argparse.Namespace) -> None:
     import numpy as np
 
@@ -387,8 +514,18 @@ def main(argv: list[str] | None = None) -> None:
     m.add_argument("--target-height", type=int, default=800)
     m.add_argument("--target-views", type=int, default=100)
     add_out_argument(m)
+    x = sub.add_parser("measured", help="a workflow run at the target size against the model")
+    x.add_argument("--directory", required=True, help="the workflow directory of the run (results/, benchmarks/)")
+    x.add_argument("--config", nargs="+", default=["config/size800.yaml"], help="its config file(s)")
+    x.add_argument("--scene", default="chair800")
+    x.add_argument("--bins", type=int, default=4)
+    x.add_argument("--runs", nargs="+", default=["edi-3dgs", "eigs+"])
+    x.add_argument("--steps", type=Path, required=True, help="records of `steps` (the model's step times)")
+    x.add_argument("--threads", type=int, default=2)
+    x.add_argument("--upstream", type=Path, help="records of `upstream` (EDI and SfM)")
+    x.add_argument("--json", type=Path, help="also write the measurements as JSON here")
     a = ap.parse_args(argv)
-    {"steps": steps, "upstream": upstream, "model": model}[a.cmd](a)
+    {"steps": steps, "upstream": upstream, "model": model, "measured": measured}[a.cmd](a)
 
 
 if __name__ == "__main__":

@@ -91,3 +91,47 @@ def test_model_writes_its_section_from_records(tmp_path):
     assert data["3dgs"]["fits"][0]["target_ms"] == pytest.approx(1e3 * (0.002 + 0.64 / 4))
     md = (out / "cost.md").read_text()
     assert "800×800" in md and "| 3dgs | 1000 | 5,000 |" in md and (out / "bench_cost.png").is_file()
+
+
+def test_step_at_interpolates_in_log_count_and_clamps_outside():
+    lines = {5000: (0.010, 1.0), 20000: (0.030, 2.0)}  # at P = 0.5: 0.51 s and 1.03 s
+    assert cost.step_at(lines, 5000, 0.5) == pytest.approx(0.51)
+    assert cost.step_at(lines, 10000, 0.5) == pytest.approx(0.51 + 0.52 * np.log(2) / np.log(4))  # halfway in log
+    assert cost.step_at(lines, 1000, 0.5) == pytest.approx(0.51)
+    assert cost.step_at(lines, 90000, 0.5) == pytest.approx(1.03)
+
+
+def test_train_log_intervals_leave_out_evaluations_and_plateau_is_first_within_tolerance():
+    rows = [{"step": s, "wall_s": w, "n_gaussians": g, "psnr_novel": p} for s, w, g, p in (
+        (50, 10.0, 100, ""), (100, 20.0, 120, ""), (150, 45.0, 150, "20.0"), (200, 55.0, 150, ""),
+        (250, 80.0, 160, "21.8"), (300, 90.0, 170, ""), (350, 115.0, 170, "22.0"))]  # fmt: skip
+    assert cost.step_intervals(rows) == [(50, 0.2, 100), (50, 0.2, 150), (50, 0.2, 160)]
+    assert cost.plateau_step(rows) == (250, 21.8)
+    assert cost.plateau_step(rows, tolerance_db=0.1) == (350, 22.0)
+    assert cost.plateau_step(rows[:2]) is None
+
+
+def test_measured_reads_a_workflow_directory(tmp_path, capsys):
+    d = tmp_path / "run"
+    (d / "benchmarks" / "edi").mkdir(parents=True)
+    (d / "benchmarks" / "edi" / "s_b4.tsv").write_text("s\th:m:s\tmax_rss\tcpu_time\n120.0\t0:02:00\t2048\t200.0\n")
+    log = d / "results" / "s" / "b4" / "eigs+" / "train_log.csv"
+    log.parent.mkdir(parents=True)
+    log.write_text("step,wall_s,n_gaussians,psnr_novel\n50,5,5000,\n100,10,5000,\n150,20,5000,25.0\n200,25,5000,\n")
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text("scenes:\n  s: {builtin: chair, overrides: {width: 1000, height: 1000, n_train: 10}}\n")
+    steps = tmp_path / "steps.jsonl"
+    steps.write_text("".join(json.dumps({"run": "eigs+", "gaussians": 5000, "threads": 2, "width": w, "height": h,
+                                         "step_s": 0.02 + 0.1 * w * h / 1e6}) + "\n"
+                             for w, h in ((128, 96), (346, 260))))  # fmt: skip
+    out = tmp_path / "m.json"
+    cost.main(["measured", "--directory", str(d), "--config", str(cfg), "--scene", "s", "--runs", "eigs+",
+               "--steps", str(steps), "--json", str(out)])  # fmt: skip
+    m = json.loads(out.read_text())
+    assert m["stages"]["edi"] == {"wall_s": 120.0, "cpu_s": 200.0, "max_rss_gb": 2.0}
+    assert m["stages"]["sfm"] is None
+    r = m["runs"]["eigs+"]
+    assert r["step_ms_median"] == pytest.approx(100.0) and r["steps"] == 200 and r["gaussians_final"] == 5000
+    assert r["model_over_measured"] == pytest.approx(1.2)  # the model's 0.12 s a step at 1 MP against 0.1 measured
+    assert r["plateau"] == [150, 25.0]
+    assert "| eigs+ | 200 |" in capsys.readouterr().out
