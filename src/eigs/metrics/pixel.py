@@ -26,6 +26,7 @@ Deblur-NeRF lineage (Deblurring-3DGS, EBAD-NeRF) computes it.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -65,7 +66,13 @@ def psnr_torch(x: torch.Tensor, y: torch.Tensor, eps: float = 1e-10) -> torch.Te
 
 
 def gaussian_window(size: int = 11, sigma: float = 1.5, dtype: torch.dtype = torch.float32) -> torch.Tensor:
-    """``(size,)`` 1-D Gaussian weights centred on the middle tap, summing to 1."""
+    """``(size,)`` 1-D Gaussian weights centred on the middle tap, summing to 1 (a fresh copy of a cached tensor:
+    a training step asks for it on every SSIM)."""
+    return _gaussian_window(int(size), float(sigma), dtype).clone()
+
+
+@functools.lru_cache(maxsize=16)
+def _gaussian_window(size: int, sigma: float, dtype: torch.dtype) -> torch.Tensor:
     x = torch.arange(size, dtype=torch.float64) - (size - 1) / 2
     g = torch.exp(-(x**2) / (2 * sigma**2))
     return (g / g.sum()).to(dtype)

@@ -108,14 +108,23 @@ def quat_left_matrix(a: Tensor) -> Tensor:
     ], -2)  # fmt: skip
 
 
-def transform_gaussians(means: Tensor, quats: Tensor, t: Tensor) -> tuple[Tensor, Tensor]:
+def rotation_product_matrix(t: Tensor) -> Tensor:
+    """(…, 4, 4) rigid transforms → (…, 4, 4) L(q_R)ᵀ, the matrix :func:`transform_gaussians` right-multiplies
+    the rotations by (q ↦ q_R ⊗ q as ``q @ L(q_R)ᵀ``)."""
+    return quat_left_matrix(rotmat_to_quat(t[..., :3, :3])).transpose(-1, -2)
+
+
+def transform_gaussians(
+    means: Tensor, quats: Tensor, t: Tensor, lt: Tensor | None = None
+) -> tuple[Tensor, Tensor]:
     """Apply the rigid (4, 4) transform ``t`` to Gaussians: centres (N, 3) ↦ R x + p, rotations (N, 4) ↦ q_R ⊗ q
     (the quaternions keep their norm). With a stack ``t`` (K, 4, 4): every transform at once, (K, N, 3) centres and
     (K, N, 4) rotations. The rotations as one product with L(q_R)ᵀ (:func:`quat_left_matrix`): one kernel and one
-    in the backward instead of some thirty element-wise ones over (K, N)."""
+    in the backward instead of some thirty element-wise ones over (K, N). ``lt``: :func:`rotation_product_matrix`
+    of ``t`` when the caller keeps it (a constant ``t``: some sixty small ops a call saved)."""
     r = t[..., :3, :3].to(means.dtype)
     p = t[..., :3, 3].to(means.dtype)
-    lt = quat_left_matrix(rotmat_to_quat(r)).transpose(-1, -2)  # (…, 4, 4)
+    lt = rotation_product_matrix(r) if lt is None else lt.to(means.dtype)  # (…, 4, 4)
     if t.dim() == 3:
         moved = torch.matmul(means, r.transpose(1, 2)) + p[:, None, :]  # (K, N, 3)
         return moved, torch.matmul(quats, lt)  # (K, N, 4)

@@ -28,7 +28,7 @@ from eigs.losses.events import (
     to_linear,
 )
 from eigs.metrics.texture import DARK_TEXTURE, ssim_texture_visibility
-from eigs.render.rigid import transform_gaussians
+from eigs.render.rigid import rotation_product_matrix, transform_gaussians
 from eigs.train.config import TrainConfig
 from eigs.train.data import TrainData
 from eigs.train.event_inputs import EventInputs
@@ -94,6 +94,7 @@ class MultiRender(Method):
         # P_0 · P_k⁻¹ moves the Gaussians the way the camera moved from P_0 to P_k (the pose prior; the motion of the
         # fixed-pose methods)
         self.relative = (self.c2w[:, :1] @ rigid_inverse(self.c2w[:, 1:])).float().to(device)  # (V, N, 4, 4)
+        self.relative_lt = rotation_product_matrix(self.relative)  # (V, N, 4, 4): constants, made once
 
     def discrete_targets(self) -> Tensor:
         """(V, H, W, C) blur targets for the N+1-sample average: the EDI latent frames averaged in linear intensity
@@ -182,7 +183,7 @@ class MultiRender(Method):
         disp = [torch.zeros_like(x)]
         prior_quats: list[Tensor | None] = [None] * self.n_latent
         if o.pose_prior:  # the Gaussians moved by P_0·P_k⁻¹ (centres and rotations) render what P_k sees
-            moved_x, moved_q = transform_gaussians(x, quats, self.relative[v])  # (N, G, 3), (N, G, 4)
+            moved_x, moved_q = transform_gaussians(x, quats, self.relative[v], self.relative_lt[v])  # (N, G, 3/4)
         for k in range(1, self.n_latent):
             dk = lam * out[:, k - 1, :3]
             if o.pose_prior:
