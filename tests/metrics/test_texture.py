@@ -54,3 +54,22 @@ def test_bad_frames_raise_clear_errors():
     bad[0, 0, 0, 0] = float("nan")
     with pytest.raises(EigsError, match="NaN"):
         ssim_texture_visibility(bad)
+
+
+def test_local_variance_frame_by_frame_equals_the_batched_convolution():
+    """local_variance convolves one frame at a time (bounded memory at 800×800); it must give the batched float64
+    convolution's values exactly."""
+    import torch
+
+    from eigs.metrics.pixel import gaussian_window
+    from eigs.metrics.texture import local_variance
+
+    y = torch.rand(5, 37, 52, generator=torch.Generator().manual_seed(3))
+    g = gaussian_window(11, 1.5, dtype=torch.float64)
+    w = torch.outer(g, g)[None, None]
+    x = y.to(torch.float64)[:, None]
+    mean, mean_sq = torch.nn.functional.conv2d(x, w), torch.nn.functional.conv2d(x * x, w)
+    expected = (mean_sq - mean * mean).clamp_min(0.0)[:, 0]
+    got = local_variance(y)
+    assert got.shape == (5, 27, 42) and got.dtype == torch.float64
+    assert torch.equal(got, expected)

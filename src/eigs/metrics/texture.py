@@ -40,15 +40,20 @@ def luma(images: Tensor) -> Tensor:
 
 
 def local_variance(y: Tensor) -> Tensor:
-    """(N, H, W) → (N, H − 10, W − 10) float64 local variance in SSIM's window (≥ 0)."""
+    """(N, H, W) → (N, H − 10, W − 10) float64 local variance in SSIM's window (≥ 0). One frame at a time: the
+    float64 convolution unfolds its input 121-fold (30 frames of 800×800 at once: an 18.6 GB buffer, which an
+    `eigs+` run at that size met while it set up; one frame: 0.6 GB)."""
     if y.ndim != 3 or y.shape[1] < WINDOW or y.shape[2] < WINDOW:
         raise EigsError(None, f"frames must be (N, H ≥ {WINDOW}, W ≥ {WINDOW}), got {tuple(y.shape)}")
     g = gaussian_window(WINDOW, 1.5, dtype=torch.float64)
     w = torch.outer(g, g)[None, None]  # (1, 1, 11, 11), sums to 1
-    x = y.to(torch.float64)[:, None]
-    mean = torch.nn.functional.conv2d(x, w)
-    mean_sq = torch.nn.functional.conv2d(x * x, w)
-    return (mean_sq - mean * mean).clamp_min(0.0)[:, 0]
+    out = y.new_empty((y.shape[0], y.shape[1] - WINDOW + 1, y.shape[2] - WINDOW + 1), dtype=torch.float64)
+    for i in range(y.shape[0]):
+        x = y[i : i + 1].to(torch.float64)[:, None]  # (1, 1, H, W)
+        mean = torch.nn.functional.conv2d(x, w)
+        mean_sq = torch.nn.functional.conv2d(x * x, w)
+        out[i] = (mean_sq - mean * mean).clamp_min(0.0)[0, 0]
+    return out
 
 
 def ssim_texture_visibility(images: Tensor) -> float:
