@@ -386,9 +386,8 @@ class EventFile:
             try:
                 ds = {k: f[f"events/{k}"] for k in ("x", "y", "t", "p")}
                 n = int(ds["t"].shape[0])
-                for k, dt in (("x", np.uint16), ("y", np.uint16), ("t", np.int64), ("p", np.int8)):
-                    if ds[k].dtype != np.dtype(dt):
-                        raise EigsError(path, f"events/{k} has dtype {ds[k].dtype}, expected {np.dtype(dt)}")
+                check_event_dtypes(p, Events(ds["x"], ds["y"], ds["t"], ds["p"]))  # datasets: read nothing
+                for k in ("x", "y", "p"):
                     if ds[k].shape != (n,):
                         raise EigsError(path, f"events/{k} has {ds[k].shape[0]} entries but events/t has {n}")
                 self._width = int(f["camera"].attrs["width"])

@@ -132,24 +132,9 @@ def check_view_index_sorted(
 
 def check_view_index(path: str, events: Events, exposure_us: np.ndarray | None, n_views: int) -> None:
     """``view_index`` (V, 2) must be non-decreasing offsets in [0, N]; with known exposures it must equal exactly
-    the events with start ≤ t < end of each view."""
-    vi = events.view_index
-    if vi is None:
-        return
-    n = len(events)
-    _view_index_ranges(path, vi, n, n_views)
-    if exposure_us is not None:
-        lo = np.searchsorted(events.t, exposure_us[:, 0], side="left")
-        hi = np.searchsorted(events.t, exposure_us[:, 1], side="left")
-        bad = np.flatnonzero((lo != vi[:, 0]) | (hi != vi[:, 1]))
-        if bad.size:
-            v = int(bad[0])
-            raise EigsError(
-                path,
-                f"events/view_index does not cover the events of view {v}'s exposure "
-                f"[{exposure_us[v, 0]}, {exposure_us[v, 1]}) µs: has [{vi[v, 0]}, {vi[v, 1]}), "
-                f"expected [{lo[v]}, {hi[v]})",
-            )
+    the events with start ≤ t < end of each view (:func:`check_view_index_sorted` on the events in memory)."""
+    if events.view_index is not None:
+        check_view_index_sorted(path, events.view_index, len(events), events.t, exposure_us, n_views)
 
 
 def validate_header(path: str, scene: Scene) -> None:
