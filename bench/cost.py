@@ -49,6 +49,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench._report import add_out_argument, machine, timed  # noqa: E402
 from bench.device_batch import merged_config  # noqa: E402
 from bench.train import resized_cloud  # noqa: E402
+from eigs.artifacts.gaussians import read_gaussian_ply  # noqa: E402
 from eigs.train.config import TrainConfig  # noqa: E402
 from eigs.train.data import TrainData, load_train_data  # noqa: E402
 from eigs.train.gaussian.trainer import Trainer  # noqa: E402
@@ -117,6 +118,24 @@ def step_seconds(data: TrainData, run: dict, repeats: int) -> float:
     return statistics.median(times)
 
 
+def mean_pairs(data: TrainData, views: int = 3) -> float:
+    """Mean (Gaussian, tile) pairs of ``data.init`` rendered at the reference poses of the first ``views`` training
+    views (what the compositing's cost follows)."""
+    from eigs.render.gaussians import render_gaussians
+
+    c = data.init
+    t = {k: torch.from_numpy(v) for k, v in (("means", c.means), ("quats", c.quats), ("scales", c.log_scales),
+                                              ("opacity", c.opacity), ("dc", c.f_dc))}  # fmt: skip
+    sh = t["dc"].reshape(len(c), 1, -1)
+    n = []
+    with torch.no_grad():
+        for v in range(min(views, data.n_views)):
+            *_, info = render_gaussians(t["means"], t["quats"], t["scales"], t["opacity"].reshape(-1), sh,
+                                        data.c2w[v, 0], data.K, data.width, data.height)  # fmt: skip
+            n.append(info["n_isects"])
+    return float(statistics.mean(n)) if n else 0.0
+
+
 def steps(args: argparse.Namespace) -> None:
     keep_freed_memory()  # as `eigs train` does
     config = merged_config(args.config)
@@ -127,21 +146,27 @@ def steps(args: argparse.Namespace) -> None:
     res = Path(args.results)
     b = res / f"b{args.bins}"
     base = load_train_data(res / "scene.h5", Path(args.edi) if args.edi else b / "edi.h5", b / "sfm", b / "init.ply")
-    cloud = base.init
+    cloud = base.init if args.init is None else read_gaussian_ply(args.init)
+    counts = [int(x) for x in args.gaussians.split(",")] if args.gaussians else [len(cloud)]
+    if args.init is not None and max(counts) > len(cloud):
+        raise SystemExit(f"cost.py: --gaussians {max(counts):,} is more than --init {args.init} holds "
+                         f"({len(cloud):,}): a trained cloud is timed on subsets of itself")  # fmt: skip
     host = machine()
     out = Path(args.out)
     for size in args.sizes.split(","):
         w, h = parse_size(size)
         data = resized(base, w, h)
-        for n in (int(x) for x in args.gaussians.split(",")):
+        for n in counts:
             data.init = resized_cloud(cloud, n)
+            pairs = mean_pairs(data)
             for threads in (int(x) for x in args.threads.split(",")):
                 torch.set_num_threads(threads)
                 for r in runs:
                     s = step_seconds(data, config["runs"][r], args.repeats)
                     rec = {"scene": res.name, "run": r, "method": config["runs"][r]["method"], "width": w,
                            "height": h, "views": base.n_views, "gaussians": n, "threads": threads, "step_s": s,
-                           "repeats": args.repeats, "machine": host}  # fmt: skip
+                           "repeats": args.repeats, "machine": host, "pairs": pairs,
+                           "cloud": "init" if args.init is None else str(args.init)}  # fmt: skip
                     with out.open("a") as f:
                         f.write(json.dumps(rec) + "\n")
                     print(f"{r:10s} {w}x{h} {n:>7,} G {threads:>2} thr: {s * 1e3:8.1f} ms/step", flush=True)
@@ -272,6 +297,15 @@ def _benchmark(path: Path) -> dict | None:
             "max_rss_gb": float(rows[-1]["max_rss"]) / 1024} if rows else None  # fmt: skip
 
 
+def parse_alias(text: str) -> tuple[str, str]:
+    """``RUN=TIMED`` → (RUN, TIMED): the run of the workflow directory and the run of the ``steps`` records that
+    model it (a longer copy of a configured run has the configured run's step)."""
+    run, sep, timed = text.partition("=")
+    if not sep or not run or not timed:
+        raise SystemExit(f"cost.py: --alias: {text!r} is not RUN=TIMED")
+    return run, timed
+
+
 def measured(args: argparse.Namespace) -> None:
     import csv
 
@@ -286,6 +320,7 @@ def measured(args: argparse.Namespace) -> None:
     w, h, views = int(over["width"]), int(over["height"]), int(over["n_train"])
     p = w * h / 1e6
     recs = [r for r in read_jsonl(args.steps) if r["threads"] == args.threads]
+    aliases = dict(parse_alias(a) for a in args.alias)
     up = read_jsonl(args.upstream) if args.upstream else []
     frames = views * (b + 1)
     predicted: dict[str, float] = {}
@@ -317,8 +352,9 @@ def measured(args: argparse.Namespace) -> None:
             continue
         rows = list(csv.DictReader(log.read_text().splitlines()))
         lines = {}
-        for g in sorted({r["gaussians"] for r in recs if r["run"] == run}):
-            rr = [r for r in recs if r["run"] == run and r["gaussians"] == g]
+        timed = aliases.get(run, run)  # the run whose `steps` records model this one
+        for g in sorted({r["gaussians"] for r in recs if r["run"] == timed}):
+            rr = [r for r in recs if r["run"] == timed and r["gaussians"] == g]
             lines[g] = fit_linear([r["width"] * r["height"] / 1e6 for r in rr], [r["step_s"] for r in rr])
         iv = step_intervals(rows)
         meas = np.array([t for _, t, _ in iv])
@@ -494,7 +530,10 @@ def main(argv: list[str] | None = None) -> None:
     s.add_argument("--config", type=Path, nargs="+", required=True, help="config files with the runs")
     s.add_argument("--runs", required=True, help="comma-separated run names of the config")
     s.add_argument("--sizes", required=True, help="comma-separated WxH")
-    s.add_argument("--gaussians", default="20000", help="comma-separated Gaussian counts")
+    s.add_argument("--gaussians", default="20000",
+                   help="comma-separated Gaussian counts ('' with --init: the cloud's own count)")
+    s.add_argument("--init", type=Path, help="time this cloud (a trained model.ply) instead of the scene's init cloud: "
+                   "each count a random subset of it, so that its Gaussians keep their trained sizes")
     s.add_argument("--threads", default="1", help="comma-separated thread counts")
     s.add_argument("--repeats", type=int, default=5)
     s.add_argument("-o", "--out", required=True, help="JSON-lines file the records are appended to")
@@ -524,6 +563,8 @@ def main(argv: list[str] | None = None) -> None:
     x.add_argument("--threads", type=int, default=2)
     x.add_argument("--upstream", type=Path, help="records of `upstream` (EDI and SfM)")
     x.add_argument("--json", type=Path, help="also write the measurements as JSON here")
+    x.add_argument("--alias", action="append", default=[], metavar="RUN=TIMED",
+                   help="model RUN with the `steps` records of TIMED (e.g. eigs+plateau=eigs+)")
     a = ap.parse_args(argv)
     {"steps": steps, "upstream": upstream, "model": model, "measured": measured}[a.cmd](a)
 

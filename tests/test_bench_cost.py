@@ -135,3 +135,36 @@ def test_measured_reads_a_workflow_directory(tmp_path, capsys):
     assert r["model_over_measured"] == pytest.approx(1.2)  # the model's 0.12 s a step at 1 MP against 0.1 measured
     assert r["plateau"] == [150, 25.0]
     assert "| eigs+ | 200 |" in capsys.readouterr().out
+    # a longer copy of the run, modelled by the configured run's records
+    longer = d / "results" / "s" / "b4" / "eigs+long" / "train_log.csv"
+    longer.parent.mkdir(parents=True)
+    longer.write_text(log.read_text())
+    cost.main(["measured", "--directory", str(d), "--config", str(cfg), "--scene", "s", "--runs", "eigs+long",
+               "--steps", str(steps), "--json", str(out), "--alias", "eigs+long=eigs+"])  # fmt: skip
+    assert json.loads(out.read_text())["runs"]["eigs+long"]["model_over_measured"] == pytest.approx(1.2)
+    with pytest.raises(SystemExit, match="--alias"):
+        cost.parse_alias("eigs+long")
+
+
+def test_mean_pairs_counts_one_tile_per_tiny_gaussian_and_none_behind_the_camera():
+    """Gaussians of 1/100 pixel at the centres of distinct 16×16 tiles, 1 unit in front of an identity camera, each
+    make exactly one (Gaussian, tile) pair; the same Gaussians behind the camera make none."""
+    import dataclasses
+
+    import torch
+
+    from eigs.artifacts.gaussians import GaussianCloud
+
+    w, h, f = 64, 48, 100.0
+    px = np.array([[8.0, 8.0], [24.0, 8.0], [40.0, 24.0], [56.0, 40.0], [8.0, 40.0]])  # tile centres
+    n = len(px)
+    means = np.stack([(px[:, 0] - w / 2) / f, (px[:, 1] - h / 2) / f, np.ones(n)], axis=1).astype(np.float32)
+    cloud = GaussianCloud(means=means, f_dc=np.zeros((n, 3), np.float32), f_rest=np.zeros((n, 3, 0), np.float32),
+                          opacity=np.full(n, 2.0, np.float32), log_scales=np.full((n, 3), np.log(1e-4), np.float32),
+                          quats=np.tile(np.float32([1, 0, 0, 0]), (n, 1)))  # fmt: skip
+    fields = {"init": cloud, "n_views": 2, "c2w": torch.eye(4, dtype=torch.float64).expand(2, 1, 4, 4),
+              "K": torch.tensor([[f, 0, w / 2], [0, f, h / 2], [0, 0, 1]]), "width": w, "height": h}
+    data = dataclasses.make_dataclass("Data", list(fields))(**fields)
+    assert cost.mean_pairs(data) == float(n)
+    behind = dataclasses.replace(cloud, means=means * np.float32([1, 1, -1]))
+    assert cost.mean_pairs(dataclasses.replace(data, init=behind)) == 0.0
