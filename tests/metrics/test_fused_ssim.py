@@ -91,3 +91,50 @@ def test_photometric_loss_takes_the_fused_kernel_and_agrees_with_the_reference()
     tgt = y.float().requires_grad_()
     photometric_loss(x.float(), tgt)[0].backward()
     assert tgt.grad is not None and tgt.grad.abs().sum() > 0
+
+
+def composite_photometric(image: torch.Tensor, target: torch.Tensor, lam: float, data_range: float):
+    """The photometric loss as tensor ops around the fused SSIM: what l1_ssim_fused replaces."""
+    l1 = (image - target).abs().mean()
+    dssim = 1.0 - ssim_fused(image.movedim(-1, -3), target.movedim(-1, -3), data_range=data_range)
+    return (1.0 - lam) * l1 + lam * dssim, l1, dssim
+
+
+@pytest.mark.parametrize("shape", [(1, 1, 3), (2, 7, 5, 1), (16, 16, 3), (5, 23, 31, 3), (3, 40, 18, 2)])
+@pytest.mark.parametrize(("lam", "data_range", "upstream"), [(0.2, 1.0, 1.0), (0.5, 0.3, 2.0), (0.9, 1.0, -0.37)])
+def test_fused_photometric_loss_has_the_tensor_ops_gradient_bit_for_bit(shape, lam, data_range, upstream) -> None:
+    """photometric_loss through l1_ssim_fused against the same loss as tensor ops around the SSIM kernel: the gradient
+    identical (the same float32 operations), the loss and its terms within float32 summation order; some pixels equal
+    to their target (the L1's subgradient 0)."""
+    x, y = pair(shape, seed=shape[-2] + int(10 * lam), scale=min(data_range, 1.0))
+    x, y = x.float(), y.float()
+    x.view(-1)[::7] = y.view(-1)[::7]
+    got_x = x.clone().requires_grad_()
+    got = photometric_loss(got_x, y, lam, data_range)
+    (upstream * got[0]).backward()
+    ref_x = x.clone().requires_grad_()
+    ref = composite_photometric(ref_x, y, lam, data_range)
+    (upstream * ref[0]).backward()
+    assert torch.equal(got_x.grad, ref_x.grad), (got_x.grad - ref_x.grad).abs().max()
+    for a, b in zip(got, ref, strict=True):
+        assert a.dtype == torch.float32 and a.shape == ()
+        assert abs(a.item() - b.item()) <= 1e-6 * max(1.0, abs(b.item())), (a.item(), b.item())
+
+
+def test_fused_photometric_means_match_float64_and_refuse_what_they_cannot_take() -> None:
+    from eigs.metrics.fused_ssim import l1_ssim_fused
+
+    x, y = pair((4, 21, 19, 3), seed=3)
+    l1, s = l1_ssim_fused(x.float(), y.float())
+    assert abs(l1.item() - (x.float().double() - y.float().double()).abs().mean().item()) < 1e-7
+    ref = ssim_torch(x.movedim(-1, -3), y.movedim(-1, -3))
+    assert abs(s.item() - ref.item()) < TOL
+    with pytest.raises(ValueError, match="l1_ssim_fused takes"):
+        l1_ssim_fused(x, y)  # float64
+    with pytest.raises(ValueError, match="l1_ssim_fused takes"):
+        l1_ssim_fused(x.float().reshape(-1), y.float().reshape(-1))
+    with pytest.raises(ValueError, match="data_range"):
+        l1_ssim_fused(x.float(), y.float(), data_range=0.0)
+    empty = torch.zeros(0, 4, 4, 3)
+    l1, s = l1_ssim_fused(empty.requires_grad_(), torch.zeros(0, 4, 4, 3))
+    assert torch.isnan(l1) and torch.isnan(s)  # a mean over nothing, as torch's

@@ -1,12 +1,13 @@
-"""The 3DGS photometric loss: (1 − λ)·L1 + λ·(1 − SSIM), SSIM in the ``3dgs`` lineage (``eigs.metrics``): the fused
-kernel (:mod:`eigs.metrics.fused_ssim`) on float32 CPU tensors with a fixed target, else the tensor-op reference."""
+"""The 3DGS photometric loss: (1 − λ)·L1 + λ·(1 − SSIM), SSIM in the ``3dgs`` lineage (``eigs.metrics``): on float32
+CPU tensors with a fixed target both means in one fused kernel (:func:`eigs.metrics.fused_ssim.l1_ssim_fused`, the
+same gradient as the tensor ops), else the tensor ops with the reference SSIM."""
 
 from __future__ import annotations
 
 import torch
 from torch import Tensor
 
-from eigs.metrics.fused_ssim import fused_ssim_applies, ssim_fused
+from eigs.metrics.fused_ssim import fused_ssim_applies, l1_ssim_fused
 from eigs.metrics.pixel import ssim_torch
 
 
@@ -23,10 +24,13 @@ def photometric_loss(
         raise ValueError(f"image {tuple(image.shape)} and target {tuple(target.shape)} differ")
     if image.dim() not in (3, 4):
         raise ValueError(f"expected (H, W, C) or (K, H, W, C), got {tuple(image.shape)}")
+    if lambda_dssim != 0 and fused_ssim_applies(image, target):
+        l1, ssim = l1_ssim_fused(image, target, ssim_range)
+        dssim = 1.0 - ssim
+        return (1.0 - lambda_dssim) * l1 + lambda_dssim * dssim, l1, dssim
     l1 = (image - target).abs().mean()
     if lambda_dssim == 0:
         return l1, l1, torch.zeros((), dtype=l1.dtype)
     x, y = image.movedim(-1, -3), target.movedim(-1, -3)  # (…, C, H, W)
-    ssim = ssim_fused if fused_ssim_applies(x, y) else ssim_torch
-    dssim = 1.0 - ssim(x, y, data_range=ssim_range)
+    dssim = 1.0 - ssim_torch(x, y, data_range=ssim_range)
     return (1.0 - lambda_dssim) * l1 + lambda_dssim * dssim, l1, dssim

@@ -65,3 +65,40 @@ def ssim_fused(x: Tensor, y: Tensor, reduction: str = "mean", data_range: float 
     c1, c2 = (K1 * data_range) ** 2, (K2 * data_range) ** 2
     smap = _SSIMMap.apply(xp.contiguous(), yp.contiguous(), window, c1, c2)  # (N C, H, W)
     return reduce_ssim_map(smap, n, batched, reduction)
+
+
+class _L1SSIM(torch.autograd.Function):
+    """Mean |x − y| and mean SSIM (mode ``3dgs``) of channels-last images ``x``, ``y`` (K, H, W, C), both 0-dim
+    float32; the gradient flows to ``x`` only."""
+
+    @staticmethod
+    def forward(ctx, x: Tensor, y: Tensor, window: Tensor, c1: float, c2: float) -> tuple[Tensor, Tensor]:  # type: ignore[override]
+        sums, partials = load().l1_ssim_fwd(x, y, window, c1, c2, ctx.needs_input_grad[0])
+        ctx.save_for_backward(x, y, window, partials)
+        n = x.numel()  # no values: NaN, as a mean over nothing is in torch
+        return (sums[0] / n).to(x.dtype), (sums[1] / n).to(x.dtype)
+
+    @staticmethod
+    @once_differentiable
+    def backward(ctx, v_l1: Tensor, v_ssim: Tensor) -> tuple[Tensor | None, None, None, None, None]:  # type: ignore[override]
+        x, y, window, partials = ctx.saved_tensors
+        v_x = load().l1_ssim_bwd(x, y, partials, window, float(v_l1), float(v_ssim))
+        return v_x, None, None, None, None
+
+
+def l1_ssim_fused(x: Tensor, y: Tensor, data_range: float = 1.0) -> tuple[Tensor, Tensor]:
+    """(mean |x − y|, mean SSIM) of channels-last images ``x``, ``y`` ((H, W, C) or (K, H, W, C), float32 CPU, ``y``
+    without gradient), differentiable in ``x``: what ``(x - y).abs().mean()`` and :func:`ssim_fused` of the images
+    moved to (…, C, H, W) give, in one pass over the images and without their channels-first copies. The gradient is
+    the same float32 arithmetic as those two graphs' (tested bit for bit); the two means are summed in float64, so
+    they differ from the graphs' float32 sums in the last bits."""
+    if not fused_ssim_applies(x, y) or x.dim() not in (3, 4):
+        raise ValueError(f"l1_ssim_fused takes (H, W, C) or (K, H, W, C) float32 CPU tensors of one shape, y without "
+                         f"gradient; got {tuple(x.shape)} {x.dtype} {x.device}, {tuple(y.shape)} {y.dtype} "
+                         f"{y.device}")  # fmt: skip
+    if not (data_range > 0 and data_range < float("inf")):
+        raise ValueError(f"data_range must be finite and > 0, got {data_range}")
+    if x.dim() == 3:
+        x, y = x.unsqueeze(0), y.unsqueeze(0)
+    c1, c2 = (K1 * data_range) ** 2, (K2 * data_range) ** 2
+    return _L1SSIM.apply(x.contiguous(), y.contiguous(), gaussian_window(), c1, c2)

@@ -15,6 +15,7 @@
 #include <ATen/Parallel.h>
 
 #include <algorithm>
+#include <cmath>
 #include <vector>
 
 namespace {
@@ -249,9 +250,132 @@ torch::Tensor ssim_map_bwd(const torch::Tensor& v_map, const torch::Tensor& x, c
     return v_x;
 }
 
+// The photometric loss's two means over channels-last images, fused (eigs.losses.photometric): x, y (K, H, W, C)
+// float32 contiguous, plane p = k C + c. Forward: the sums of |x - y| and of the SSIM map (each in double, per-row
+// partial sums added in a fixed order) and, with need_grad, the partials (P, 3, H, W) as ssim_map_fwd makes them.
+// Backward, for upstream gradients g_l1 and g_ssim of the two means over n = K H W C values: v_x (K, H, W, C) =
+// (g_l1 / n) sgn(x - y) + the SSIM map's gradient for the cotangent g_ssim / n at every pixel (ssim_map_bwd's), the
+// same float32 operations as the autograd graph of mean(|x - y|) and mean(ssim map) with the kernels above.
+struct ChannelsLast {
+    int64_t k, h, w, c;
+    int64_t base(int64_t p, int64_t i) const { return ((p / c * h + i) * w) * c + p % c; }  // (plane, row) -> x[.., 0]
+};
+
+ChannelsLast check_channels_last(const torch::Tensor& t, const char* name) {
+    TORCH_CHECK(t.dim() == 4, name, " must be (K, H, W, C), got ", t.sizes());
+    TORCH_CHECK(t.scalar_type() == torch::kFloat32, name, " must be float32");
+    TORCH_CHECK(t.device().is_cpu() && t.is_contiguous(), name, " must be a contiguous CPU tensor");
+    return {t.size(0), t.size(1), t.size(2), t.size(3)};
+}
+
+std::vector<torch::Tensor> l1_ssim_fwd(const torch::Tensor& x, const torch::Tensor& y, const torch::Tensor& window,
+                                       double c1, double c2, bool need_grad) {
+    const ChannelsLast L = check_channels_last(x, "x");
+    check_channels_last(y, "y");
+    TORCH_CHECK(x.sizes() == y.sizes(), "x and y differ: ", x.sizes(), " vs ", y.sizes());
+    TORCH_CHECK(c1 > 0 && c2 > 0, "c1 and c2 must be > 0");
+    const auto win = window_of(window, false);
+    const int64_t planes = L.k * L.c, h = L.h, w = L.w;
+    auto sums = torch::zeros({2}, x.options().dtype(torch::kFloat64));
+    auto partials = need_grad ? torch::empty({planes, 3, h, w}, x.options()) : torch::empty({0}, x.options());
+    if (x.numel() == 0) return {sums, partials};
+    std::vector<double> l1_rows(size_t(planes * h)), s_rows(size_t(planes * h));
+    auto tmp = torch::empty({planes, 5, h, w}, x.options());
+    const float* xs = x.data_ptr<float>();
+    const float* ys = y.data_ptr<float>();
+    horizontal_pass<5>(planes, h, w, win, tmp.data_ptr<float>(), [&](int64_t p, int64_t i, float** rows) {
+        const float* xr = xs + L.base(p, i);
+        const float* yr = ys + L.base(p, i);
+        double l1 = 0.0;
+        for (int64_t j = 0; j < w; ++j) {
+            const float a = xr[j * L.c], b = yr[j * L.c];
+            rows[0][j] = a;
+            rows[1][j] = b;
+            rows[2][j] = a * a;
+            rows[3][j] = b * b;
+            rows[4][j] = a * b;
+            l1 += double(std::fabs(a - b));
+        }
+        l1_rows[size_t(p * h + i)] = l1;
+    });
+    float* d = need_grad ? partials.data_ptr<float>() : nullptr;
+    const float fc1 = float(c1), fc2 = float(c2);
+    vertical_pass<5>(planes, h, w, tmp.data_ptr<float>(), [&](int64_t p, int64_t i, const float* const* rows) {
+        thread_local std::vector<float> buf;
+        buf.resize(size_t(6 * w));
+        float* mom[5];
+        for (int m = 0; m < 5; ++m) mom[m] = buf.data() + m * w;
+        float* srow = buf.data() + 5 * w;
+        vertical_row(rows, mom, 5, w, win.data());
+        float* dm = d ? d + ((p * 3 + 0) * h + i) * w : nullptr;
+        float* dxx = d ? d + ((p * 3 + 1) * h + i) * w : nullptr;
+        float* dxy = d ? d + ((p * 3 + 2) * h + i) * w : nullptr;
+        ssim_row(mom, w, fc1, fc2, srow, dm, dxx, dxy);
+        double acc = 0.0;
+        for (int64_t j = 0; j < w; ++j) acc += double(srow[j]);
+        s_rows[size_t(p * h + i)] = acc;
+    });
+    double l1 = 0.0, s = 0.0;
+    for (size_t r = 0; r < l1_rows.size(); ++r) {
+        l1 += l1_rows[r];
+        s += s_rows[r];
+    }
+    auto acc = sums.accessor<double, 1>();
+    acc[0] = l1;
+    acc[1] = s;
+    return {sums, partials};
+}
+
+torch::Tensor l1_ssim_bwd(const torch::Tensor& x, const torch::Tensor& y, const torch::Tensor& partials,
+                          const torch::Tensor& window, double g_l1, double g_ssim) {
+    const ChannelsLast L = check_channels_last(x, "x");
+    check_channels_last(y, "y");
+    TORCH_CHECK(x.sizes() == y.sizes(), "x and y differ: ", x.sizes(), " vs ", y.sizes());
+    const int64_t planes = L.k * L.c, h = L.h, w = L.w;
+    TORCH_CHECK(partials.dim() == 4 && partials.size(0) == planes && partials.size(1) == 3 && partials.size(2) == h &&
+                    partials.size(3) == w && partials.is_contiguous() && partials.scalar_type() == torch::kFloat32,
+                "partials must be (K C, 3, H, W) float32 contiguous");
+    const auto win = window_of(window, true);
+    auto v_x = torch::empty_like(x);
+    if (x.numel() == 0) return v_x;
+    // the per-value cotangents of the two means, as autograd's mean backward makes them: float32 g / float32(n)
+    const float n = float(x.numel());
+    const float v_l1 = float(g_l1) / n, v_s = float(g_ssim) / n;
+    auto tmp = torch::empty({planes, 3, h, w}, x.options());
+    const float* ds = partials.data_ptr<float>();
+    horizontal_pass<3>(planes, h, w, win, tmp.data_ptr<float>(), [&](int64_t p, int64_t i, float** rows) {
+        for (int m = 0; m < 3; ++m) {
+            const float* dr = ds + ((p * 3 + m) * h + i) * w;
+            for (int64_t j = 0; j < w; ++j) rows[m][j] = v_s * dr[j];
+        }
+    });
+    const float* xs = x.data_ptr<float>();
+    const float* ys = y.data_ptr<float>();
+    float* out = v_x.data_ptr<float>();
+    vertical_pass<3>(planes, h, w, tmp.data_ptr<float>(), [&](int64_t p, int64_t i, const float* const* rows) {
+        thread_local std::vector<float> buf;
+        buf.resize(size_t(3 * w));
+        float *xr = buf.data(), *yr = buf.data() + w, *g = buf.data() + 2 * w;
+        const int64_t o = L.base(p, i);
+        for (int64_t j = 0; j < w; ++j) {
+            xr[j] = xs[o + j * L.c];
+            yr[j] = ys[o + j * L.c];
+        }
+        grad_row(rows, w, win.data(), xr, yr, g);
+        for (int64_t j = 0; j < w; ++j) {
+            const float diff = xr[j] - yr[j];
+            const float sgn = diff > 0.0f ? 1.0f : diff < 0.0f ? -1.0f : 0.0f;  // as torch.sgn: +0 for ±0 and NaN
+            out[o + j * L.c] = v_l1 * sgn + g[j];
+        }
+    });
+    return v_x;
+}
+
 }  // namespace
 
 PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
     m.def("ssim_map_fwd", &ssim_map_fwd, "SSIM map (P, H, W) and, with need_grad, its partials (P, 3, H, W)");
     m.def("ssim_map_bwd", &ssim_map_bwd, "gradient of the SSIM map with respect to x, (P, H, W)");
+    m.def("l1_ssim_fwd", &l1_ssim_fwd, "sums of |x - y| and of the SSIM map of (K, H, W, C) images, and the partials");
+    m.def("l1_ssim_bwd", &l1_ssim_bwd, "gradient of mean |x - y| and mean SSIM with respect to x, (K, H, W, C)");
 }
