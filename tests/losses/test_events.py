@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import torch
 
 from eigs.edi import edi
@@ -109,3 +110,52 @@ def test_noise_aware_event_loss_forgives_exactly_the_stated_tolerance():
     assert abs(float(got) - float(want)) < 1e-12 and abs(float(want) - 0.125) < 1e-12
     # the defaults are the paper's L1
     assert abs(float(event_integration_loss(log_a, log_b, counts, c, c)) - float(errors.abs().mean())) < 1e-12
+
+
+@pytest.mark.parametrize("masked", [False, True])
+@pytest.mark.parametrize("maps", [False, True])
+@pytest.mark.parametrize(("renders", "h", "w"), [(2, 1, 1), (5, 17, 23), (9, 40, 33)])
+def test_fused_event_loss_over_renders_has_the_slices_gradient_bit_for_bit(masked, maps, renders, h, w):
+    """event_loss_over_renders (the fused kernel) against event_integration_loss on the slices of the same logs: the
+    gradient identical (the same float32 operations), the loss within float32 summation order; some intervals with
+    no change and an exact match (the L1's subgradient 0)."""
+    from eigs.losses.fused_events import event_loss_over_renders
+
+    g = torch.Generator().manual_seed(renders * h + int(masked) + 2 * int(maps))
+    logs0 = torch.randn(renders, h, w, generator=g)
+    logs0[1] = logs0[0]  # no change over the first interval
+    cum = torch.randint(-3, 4, (renders, h, w), generator=g).cumsum(0).to(torch.int32)
+    c_pos = 0.2 + 0.05 * torch.rand(h, w, generator=g) if maps else 0.21
+    c_neg = 0.2 + 0.05 * torch.rand(h, w, generator=g) if maps else 0.19
+    if renders > 2:  # one pixel whose second interval matches its count exactly: |r| = 0
+        cum[2, 0, 0] = cum[1, 0, 0] + 2
+        logs0[2, 0, 0] = logs0[1, 0, 0] + 2 * (c_pos if not maps else c_pos[0, 0].item())
+    mask = torch.rand(h, w, generator=g) < 0.3 if masked else None
+    got_x = logs0.clone().requires_grad_()
+    got = event_loss_over_renders(got_x, cum, c_pos, c_neg, mask)
+    (-1.7 * got).backward()
+    ref_x = logs0.clone().requires_grad_()
+    ref = event_integration_loss(ref_x[:-1], ref_x[1:], cum[1:] - cum[:-1], c_pos, c_neg, mask)
+    (-1.7 * ref).backward()
+    assert torch.equal(got_x.grad, ref_x.grad), (got_x.grad - ref_x.grad).abs().max()
+    assert got.dtype == torch.float32 and got.shape == ()
+    assert abs(got.item() - ref.item()) <= 1e-6 * max(1.0, abs(ref.item()))
+
+
+def test_fused_event_loss_edges_and_fallback():
+    """Every pixel masked: 0 with a zero gradient, as the tensor ops; the dead zone, float64 and int64 counts take the
+    tensor ops (the same function's result); a NaN log gives a NaN loss, never a silent number."""
+    from eigs.losses.fused_events import event_loss_over_renders
+
+    logs = torch.randn(3, 4, 5, requires_grad=True)
+    cum = torch.zeros(3, 4, 5, dtype=torch.int32)
+    out = event_loss_over_renders(logs, cum, 0.2, 0.2, torch.ones(4, 5, dtype=torch.bool))
+    out.backward()
+    assert out.item() == 0.0 and torch.equal(logs.grad, torch.zeros_like(logs))
+    for kwargs, lg, cc in (({"deadzone": 0.5}, logs.detach(), cum), ({}, logs.detach().double(), cum),
+                           ({}, logs.detach(), cum.long())):  # fmt: skip
+        ref = event_integration_loss(lg[:-1], lg[1:], cc[1:] - cc[:-1], 0.2, 0.2, None, **kwargs)
+        assert torch.equal(event_loss_over_renders(lg, cc, 0.2, 0.2, None, **kwargs), ref)
+    bad = logs.detach().clone()
+    bad[1, 2, 3] = float("nan")
+    assert torch.isnan(event_loss_over_renders(bad, cum, 0.2, 0.2))

@@ -20,13 +20,13 @@ from eigs.losses import photometric_loss
 from eigs.losses.consistency import motion_consistency_loss
 from eigs.losses.events import (
     e2nerf_event_loss,
-    event_integration_loss,
     from_linear,
     lin_log,
     log_intensity,
     luma,
     to_linear,
 )
+from eigs.losses.fused_events import event_loss_over_renders
 from eigs.metrics.texture import DARK_TEXTURE, ssim_texture_visibility
 from eigs.render.rigid import rotation_product_matrix, transform_gaussians
 from eigs.train.config import TrainConfig
@@ -266,8 +266,7 @@ class MultiRender(Method):
             c_pos, c_neg = self.events.thresholds(v)
             dz, mm = o.event_deadzone, o.event_mismatch
             # the N intervals in one call: the mean of their losses
-            ev = event_integration_loss(logs[:-1], logs[1:], counts[1:] - counts[:-1], c_pos, c_neg, self.events.mask,
-                                        deadzone=dz, mismatch=mm)  # fmt: skip
+            ev = event_loss_over_renders(logs, counts, c_pos, c_neg, self.events.mask, deadzone=dz, mismatch=mm)
             loss = loss + o.lambda_event * ev
             terms["event"] = ev.item()
         elif o.event_loss == "e2nerf":
