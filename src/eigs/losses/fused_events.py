@@ -30,28 +30,32 @@ def load() -> ModuleType:
 
 
 class _EventLoss(torch.autograd.Function):
-    """Mean event-integration term of ``logs`` (L, H, W) against cumulative counts ``cum`` (L, H, W) int32; the
-    gradient flows to ``logs`` only."""
+    """Mean event-integration term of ``logs`` (L, H, W) against cumulative counts ``cum`` (L, H, W) int32 over the
+    pixels ``keep`` (H, W) (``masked``: a mask chose them, and no pixel left gives 0 as the tensor ops' clamped
+    count; else every pixel, and none gives NaN as their mean); the gradient flows to ``logs`` only."""
 
     @staticmethod
-    def forward(ctx, logs: Tensor, cum: Tensor, c_pos: Tensor, c_neg: Tensor, keep: Tensor) -> Tensor:  # type: ignore[override]
+    def forward(ctx, logs: Tensor, cum: Tensor, c_pos: Tensor, c_neg: Tensor, keep: Tensor, masked: bool) -> Tensor:  # type: ignore[override]
+        ctx.masked = masked
         (out,) = load().event_loss_fwd(logs, cum, c_pos, c_neg, keep)
         total, n = float(out[0]), int(out[1])
         ctx.save_for_backward(logs, cum, c_pos, c_neg, keep)
         ctx.n = n
         # as the tensor ops: a mask keeps at least one term in the denominator; without one, a mean over nothing is NaN
-        mean = total / max(n, 1) if keep.numel() else (total / n if n else float("nan"))
+        mean = total / max(n, 1) if ctx.masked else (total / n if n else float("nan"))
         return torch.tensor(mean, dtype=logs.dtype)
 
     @staticmethod
     @once_differentiable
-    def backward(ctx, v_loss: Tensor) -> tuple[Tensor | None, None, None, None, None]:  # type: ignore[override]
+    def backward(ctx, v_loss: Tensor) -> tuple[Tensor | None, None, None, None, None, None]:  # type: ignore[override]
         logs, cum, c_pos, c_neg, keep = ctx.saved_tensors
-        return load().event_loss_bwd(logs, cum, c_pos, c_neg, keep, float(v_loss), ctx.n), None, None, None, None
+        v_logs = load().event_loss_bwd(logs, cum, c_pos, c_neg, keep, float(v_loss), ctx.n)
+        return v_logs, None, None, None, None, None
 
 
-def _threshold(c: Tensor | float) -> Tensor:
-    return torch.as_tensor(c, dtype=torch.float32).reshape(-1).contiguous()
+def _threshold_map(c: Tensor | float, shape: torch.Size) -> Tensor:
+    """A threshold (one value or an (H, W) map) as the (H, W) float32 map the kernel reads."""
+    return torch.as_tensor(c, dtype=torch.float32).expand(shape).contiguous()
 
 
 def event_loss_over_renders(
@@ -67,5 +71,7 @@ def event_loss_over_renders(
     if not fused:
         return event_integration_loss(logs[:-1], logs[1:], cum_counts[1:] - cum_counts[:-1], c_pos, c_neg, mask,
                                       deadzone=deadzone, mismatch=mismatch)  # fmt: skip
-    keep = torch.empty(0, dtype=torch.bool) if mask is None else (~mask).contiguous()
-    return _EventLoss.apply(logs.contiguous(), cum_counts.contiguous(), _threshold(c_pos), _threshold(c_neg), keep)
+    keep = torch.ones(logs.shape[1:], dtype=torch.bool) if mask is None else (~mask).contiguous()
+    shape = logs.shape[1:]
+    return _EventLoss.apply(logs.contiguous(), cum_counts.contiguous(), _threshold_map(c_pos, shape),
+                            _threshold_map(c_neg, shape), keep, mask is not None)  # fmt: skip
