@@ -122,6 +122,12 @@ void check_planes(const torch::Tensor& t, const char* name) {
     TORCH_CHECK(t.device().is_cpu() && t.is_contiguous(), name, " must be a contiguous CPU tensor");
 }
 
+void check_partials(const torch::Tensor& partials, int64_t planes, int64_t h, int64_t w) {
+    TORCH_CHECK(partials.dim() == 4 && partials.size(0) == planes && partials.size(1) == 3 && partials.size(2) == h &&
+                    partials.size(3) == w && partials.is_contiguous() && partials.scalar_type() == torch::kFloat32,
+                "partials must be (planes, 3, H, W) float32 contiguous, got ", partials.sizes());
+}
+
 std::vector<float> window_of(const torch::Tensor& window, bool reversed) {
     TORCH_CHECK(window.dim() == 1 && window.numel() == kTaps && window.scalar_type() == torch::kFloat32 &&
                     window.device().is_cpu(),
@@ -175,6 +181,21 @@ void vertical_pass(int64_t planes, int64_t h, int64_t w, const float* tmp, RowFn
     });
 }
 
+// The SSIM of output row i of plane p from the kTaps filtered moment rows around it (vertical_pass's rows): into s
+// (w values) and, when d is not null, into that row of the partials d (P, 3, H, W).
+void ssim_output_row(const float* const* rows, int64_t p, int64_t i, int64_t h, int64_t w,
+                     const std::vector<float>& win, float c1, float c2, float* d, float* s) {
+    thread_local std::vector<float> buf;
+    buf.resize(size_t(5 * w));
+    float* mom[5];
+    for (int m = 0; m < 5; ++m) mom[m] = buf.data() + m * w;
+    vertical_row(rows, mom, 5, w, win.data());
+    float* dm = d ? d + ((p * 3 + 0) * h + i) * w : nullptr;
+    float* dxx = d ? d + ((p * 3 + 1) * h + i) * w : nullptr;
+    float* dxy = d ? d + ((p * 3 + 2) * h + i) * w : nullptr;
+    ssim_row(mom, w, c1, c2, s, dm, dxx, dxy);
+}
+
 std::vector<torch::Tensor> ssim_map_fwd(const torch::Tensor& x, const torch::Tensor& y, const torch::Tensor& window,
                                         double c1, double c2, bool need_grad) {
     check_planes(x, "x");
@@ -204,15 +225,7 @@ std::vector<torch::Tensor> ssim_map_fwd(const torch::Tensor& x, const torch::Ten
     float* d = need_grad ? partials.data_ptr<float>() : nullptr;
     const float fc1 = float(c1), fc2 = float(c2);
     vertical_pass<5>(planes, h, w, tmp.data_ptr<float>(), [&](int64_t p, int64_t i, const float* const* rows) {
-        thread_local std::vector<float> buf;
-        buf.resize(size_t(5 * w));
-        float* mom[5];
-        for (int m = 0; m < 5; ++m) mom[m] = buf.data() + m * w;
-        vertical_row(rows, mom, 5, w, win.data());
-        float* dm = d ? d + ((p * 3 + 0) * h + i) * w : nullptr;
-        float* dxx = d ? d + ((p * 3 + 1) * h + i) * w : nullptr;
-        float* dxy = d ? d + ((p * 3 + 2) * h + i) * w : nullptr;
-        ssim_row(mom, w, fc1, fc2, s + (p * h + i) * w, dm, dxx, dxy);
+        ssim_output_row(rows, p, i, h, w, win, fc1, fc2, d, s + (p * h + i) * w);
     });
     return {smap, partials};
 }
@@ -224,9 +237,7 @@ torch::Tensor ssim_map_bwd(const torch::Tensor& v_map, const torch::Tensor& x, c
     check_planes(y, "y");
     const int64_t planes = x.size(0), h = x.size(1), w = x.size(2);
     TORCH_CHECK(v_map.sizes() == x.sizes() && y.sizes() == x.sizes(), "v_map, x and y must have one shape");
-    TORCH_CHECK(partials.dim() == 4 && partials.size(0) == planes && partials.size(1) == 3 && partials.size(2) == h &&
-                    partials.size(3) == w && partials.is_contiguous() && partials.scalar_type() == torch::kFloat32,
-                "partials must be (P, 3, H, W) float32 contiguous");
+    check_partials(partials, planes, h, w);
     const auto win = window_of(window, true);
     auto v_x = torch::empty_like(x);
     if (x.numel() == 0) return v_x;
@@ -301,16 +312,10 @@ std::vector<torch::Tensor> l1_ssim_fwd(const torch::Tensor& x, const torch::Tens
     float* d = need_grad ? partials.data_ptr<float>() : nullptr;
     const float fc1 = float(c1), fc2 = float(c2);
     vertical_pass<5>(planes, h, w, tmp.data_ptr<float>(), [&](int64_t p, int64_t i, const float* const* rows) {
-        thread_local std::vector<float> buf;
-        buf.resize(size_t(6 * w));
-        float* mom[5];
-        for (int m = 0; m < 5; ++m) mom[m] = buf.data() + m * w;
-        float* srow = buf.data() + 5 * w;
-        vertical_row(rows, mom, 5, w, win.data());
-        float* dm = d ? d + ((p * 3 + 0) * h + i) * w : nullptr;
-        float* dxx = d ? d + ((p * 3 + 1) * h + i) * w : nullptr;
-        float* dxy = d ? d + ((p * 3 + 2) * h + i) * w : nullptr;
-        ssim_row(mom, w, fc1, fc2, srow, dm, dxx, dxy);
+        thread_local std::vector<float> row;
+        row.resize(size_t(w));
+        float* srow = row.data();
+        ssim_output_row(rows, p, i, h, w, win, fc1, fc2, d, srow);
         double acc = 0.0;
         for (int64_t j = 0; j < w; ++j) acc += double(srow[j]);
         s_rows[size_t(p * h + i)] = acc;
@@ -332,9 +337,7 @@ torch::Tensor l1_ssim_bwd(const torch::Tensor& x, const torch::Tensor& y, const 
     check_channels_last(y, "y");
     TORCH_CHECK(x.sizes() == y.sizes(), "x and y differ: ", x.sizes(), " vs ", y.sizes());
     const int64_t planes = L.k * L.c, h = L.h, w = L.w;
-    TORCH_CHECK(partials.dim() == 4 && partials.size(0) == planes && partials.size(1) == 3 && partials.size(2) == h &&
-                    partials.size(3) == w && partials.is_contiguous() && partials.scalar_type() == torch::kFloat32,
-                "partials must be (K C, 3, H, W) float32 contiguous");
+    check_partials(partials, planes, h, w);
     const auto win = window_of(window, true);
     auto v_x = torch::empty_like(x);
     if (x.numel() == 0) return v_x;
