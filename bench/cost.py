@@ -430,14 +430,17 @@ def model(args: argparse.Namespace) -> None:
     sizes = sorted({(r["width"], r["height"]) for r in recs}, key=lambda s: s[0] * s[1])
     body = [
         f"Issue 32, part 4. `bench/cost.py steps` timed one training step ({args.threads} threads, no "
-        f"densification, median of {recs[0].get('repeats', 'a few')} steps) of each run on d346-chair's artifacts, "
-        f"its images and event counts resized to {', '.join(f'{w}×{h}' for w, h in sizes)} (intrinsics scaled) "
-        "and its init cloud resampled to "
-        "each Gaussian count. A step renders one view, so the view count does not enter it (it enters the steps to "
-        "a plateau, EDI and SfM, below). At a fixed Gaussian count the step time is linear in the pixels, "
-        "`t = a + b·P` (P megapixels; least squares on relative error); in the Gaussian count it is not a simple "
-        "law here (4× the Gaussians cost 1.1–3× the time: a cloud resampled from 2,600 points piles copies on "
-        "one another, so alpha saturates early), so the model keeps one line per count. `800×800 from smaller`: "
+        f"densification, median of {recs[0].get('repeats', 'a few')} steps) of each run on "
+        f"{recs[0].get('scene', 'the scene')}'s artifacts, its images and event counts resized to "
+        f"{', '.join(f'{w}×{h}' for w, h in sizes)} (intrinsics scaled), "
+        + (f"with a trained cloud (`{Path(cloud).name}`) cut to each Gaussian count by a random subset, so that its "
+           "Gaussians keep their trained sizes. "
+           if (cloud := recs[0].get("cloud", "init")) != "init"
+           else "its init cloud resampled to each Gaussian count (copies of a sparse cloud pile on one another: "
+                "far more (Gaussian, tile) pairs than a trained cloud of that count). ")
+        + "A step renders one view, so the view count does not enter it (it enters the steps to a plateau, EDI and "
+        "SfM, below). At a fixed Gaussian count the step time is linear in the pixels, `t = a + b·P` (P megapixels; "
+        "least squares on relative error), and the model keeps one line per count. `800×800 from smaller`: "
         "the error of the line fitted to the smaller sizes alone, at 800×800 (an out-of-sample check).\n\n"
         + table(["run", "Gaussians", "sizes", "a (ms)", "b (ms per MP)", "max |error|", "800×800 from smaller"],
                 fit_rows),  # fmt: skip
