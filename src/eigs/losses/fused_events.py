@@ -71,7 +71,7 @@ def event_loss_over_renders(
     if not fused:
         return event_integration_loss(logs[:-1], logs[1:], cum_counts[1:] - cum_counts[:-1], c_pos, c_neg, mask,
                                       deadzone=deadzone, mismatch=mismatch)  # fmt: skip
-    keep = torch.ones(logs.shape[1:], dtype=torch.bool) if mask is None else (~mask).contiguous()
     shape = logs.shape[1:]
+    keep = torch.ones(shape, dtype=torch.bool) if mask is None else (~mask).contiguous()
     return _EventLoss.apply(logs.contiguous(), cum_counts.contiguous(), _threshold_map(c_pos, shape),
                             _threshold_map(c_neg, shape), keep, mask is not None)  # fmt: skip

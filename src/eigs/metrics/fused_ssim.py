@@ -52,17 +52,22 @@ def fused_ssim_applies(x: Tensor, y: Tensor) -> bool:
             and y.dtype == torch.float32 and x.shape == y.shape and not y.requires_grad)  # fmt: skip
 
 
+def ssim_constants(data_range: float) -> tuple[float, float]:
+    """The SSIM's (C1, C2) = ((K1 L)², (K2 L)²) for data range L, finite and > 0."""
+    if not (data_range > 0 and data_range < float("inf")):
+        raise ValueError(f"data_range must be finite and > 0, got {data_range}")
+    return (K1 * data_range) ** 2, (K2 * data_range) ** 2
+
+
 def ssim_fused(x: Tensor, y: Tensor, reduction: str = "mean", data_range: float = 1.0) -> Tensor:
     """SSIM mode ``3dgs`` of ``x`` against ``y``, ``(N, C, H, W)`` or ``(C, H, W)`` float32 CPU, as
     :func:`eigs.metrics.pixel.ssim_torch` (same reductions and ``data_range``); differentiable in ``x`` only."""
     if not fused_ssim_applies(x, y):
         raise ValueError(f"ssim_fused takes float32 CPU tensors of one shape, y without gradient; got "
                          f"{tuple(x.shape)} {x.dtype} {x.device}, {tuple(y.shape)} {y.dtype} {y.device}")  # fmt: skip
-    if not (data_range > 0 and data_range < float("inf")):
-        raise ValueError(f"data_range must be finite and > 0, got {data_range}")
+    c1, c2 = ssim_constants(data_range)
     xp, yp, n, batched = as_planes(x, y)
     window = gaussian_window()  # the 3DGS window (11 taps, σ 1.5), float32: the kernel's
-    c1, c2 = (K1 * data_range) ** 2, (K2 * data_range) ** 2
     smap = _SSIMMap.apply(xp.contiguous(), yp.contiguous(), window, c1, c2)  # (N C, H, W)
     return reduce_ssim_map(smap, n, batched, reduction)
 
@@ -96,9 +101,7 @@ def l1_ssim_fused(x: Tensor, y: Tensor, data_range: float = 1.0) -> tuple[Tensor
         raise ValueError(f"l1_ssim_fused takes (H, W, C) or (K, H, W, C) float32 CPU tensors of one shape, y without "
                          f"gradient; got {tuple(x.shape)} {x.dtype} {x.device}, {tuple(y.shape)} {y.dtype} "
                          f"{y.device}")  # fmt: skip
-    if not (data_range > 0 and data_range < float("inf")):
-        raise ValueError(f"data_range must be finite and > 0, got {data_range}")
+    c1, c2 = ssim_constants(data_range)
     if x.dim() == 3:
         x, y = x.unsqueeze(0), y.unsqueeze(0)
-    c1, c2 = (K1 * data_range) ** 2, (K2 * data_range) ** 2
     return _L1SSIM.apply(x.contiguous(), y.contiguous(), gaussian_window(), c1, c2)
