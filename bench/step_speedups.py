@@ -8,7 +8,8 @@ newest one: the smallest gain, an estimate on the safe side). ``--as NEW=RUN`` g
 whose scene data is not on the measuring machine, timed through a sibling that takes the same step).
 
 Run: ``.venv/bin/python bench/step_speedups.py A/step-ab-configured.json B/step-ab-configured.json
---as eigs-b6=eigs+ --out docs/suite/step_speedups.json``.
+--as eigs-b6=eigs+ --out docs/suite/step_speedups.json [--section]`` (``--section``: also the table of every run's
+factor, section "step-ab-runs" of docs/benchmarks.md).
 """
 
 from __future__ import annotations
@@ -65,6 +66,20 @@ def speedups(records: list[dict], aliases: dict[str, str]) -> dict:
             "factors": {k: round(v, 3) for k, v in sorted(factors.items())}}  # fmt: skip
 
 
+def section_rows(doc: dict) -> list[list[str]]:
+    """One table row per measured run: run, revision, ms then, ms now, now / then, the per-round ratios' range."""
+    rows = []
+    for run, rounds in doc["rounds"].items():
+        rev = doc["against"][run]
+        ours, theirs = rounds[OURS], rounds[rev]
+        per_round = [a / b for a, b in zip(ours, theirs, strict=False)]
+        rows.append([f"`{run}`", f"`{rev}`", f"{statistics.median(theirs):.1f}", f"{statistics.median(ours):.1f}",
+                     f"{doc['factors'][run]:.2f}", f"{min(per_round):.2f}–{max(per_round):.2f}"])  # fmt: skip
+    for new, run in doc["aliases"].items():
+        rows.append([f"`{new}`", f"`{doc['against'][new]}`", "–", "–", f"{doc['factors'][new]:.2f}", f"as `{run}`"])
+    return rows
+
+
 def parse_aliases(items: list[str]) -> dict[str, str]:
     out = {}
     for item in items:
@@ -81,6 +96,7 @@ def main() -> None:
     ap.add_argument("--as", dest="aliases", action="append", default=[], help="NEW=RUN: NEW takes RUN's factor")
     ap.add_argument("--about", default="", help="a sentence on what was measured and how")
     ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--section", action="store_true", help="write the table to docs/benchmarks.md (step-ab-runs)")
     args = ap.parse_args()
     records = []
     for path in args.records:
@@ -99,6 +115,17 @@ def main() -> None:
     tmp.write_text(json.dumps(doc, indent=1) + "\n")
     tmp.replace(args.out)
     print(", ".join(f"{r} {f:.2f} (vs {doc['against'][r]})" for r, f in doc["factors"].items()))
+    if args.section:
+        from bench._report import table, write_section
+
+        cols = ["run", "against", "ms then", "ms now", "now / then", "per round"]
+        intro = (
+            "Each run's training step (`Trainer.train_step`, `bench/step_ab.py`), this tree against the revision "
+            "named, interleaved; `now / then` is the ratio of the medians over the rounds, and "
+            f"`{args.out.name}` holds every round (`bench/step_speedups.py`)."
+        )
+        body = f"{args.about}\n\n{intro}\n\n" + table(cols, section_rows(doc))
+        write_section("step-ab-runs", "Every run's training step against the code it was trained with (issue 46)", body)
 
 
 if __name__ == "__main__":

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from bench import schedule
-from bench.step_speedups import factor, run_rounds, speedups
+from bench.step_speedups import factor, run_rounds, section_rows, speedups
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -55,3 +55,11 @@ def test_the_written_file_is_what_schedule_reads(tmp_path):
     bad = subprocess.run([sys.executable, str(REPO / "bench/step_speedups.py"), str(a), "--as", "x", "--out",
                           str(out)], capture_output=True, text=True, cwd=REPO)  # fmt: skip
     assert bad.returncode != 0 and "NEW=RUN" in bad.stderr
+
+
+def test_the_section_names_each_runs_revision_and_its_rounds():
+    doc = speedups([record("61f1220", {"3dgs": ([30.0, 40.0], [50.0, 50.0])})], {"oracle": "3dgs"})
+    assert section_rows(doc) == [
+        ["`3dgs`", "`61f1220`", "50.0", "35.0", "0.70", "0.60–0.80"],
+        ["`oracle`", "`61f1220`", "–", "–", "0.70", "as `3dgs`"],
+    ]
