@@ -76,10 +76,20 @@ def child(args: argparse.Namespace) -> None:
     for _ in range(args.warm):
         tr.train_step()
     times = []
-    for _ in range(args.steps):
-        t = time.perf_counter()
-        tr.train_step()
-        times.append((time.perf_counter() - t) * 1e3)
+    if args.lockstep:  # one step per "step" line on stdin, its ms on stdout, until "stop"
+        print("ready", flush=True)
+        for line in sys.stdin:
+            if line.strip() != "step":
+                break
+            t = time.perf_counter()
+            tr.train_step()
+            times.append((time.perf_counter() - t) * 1e3)
+            print(f"{times[-1]:.6f}", flush=True)
+    else:
+        for _ in range(args.steps):
+            t = time.perf_counter()
+            tr.train_step()
+            times.append((time.perf_counter() - t) * 1e3)
     size = n if field else len(tr.model)
     print(json.dumps({"ms": statistics.median(times), "gaussians": size, "width": data.width,
                       "height": data.height}))  # fmt: skip
@@ -94,17 +104,62 @@ def checkout(rev: str, work: Path) -> Path:
     return path
 
 
-def run_child(src: Path, case: str, args: argparse.Namespace) -> dict:
+def child_command(src: Path, case: str, args: argparse.Namespace) -> tuple[list[str], dict[str, str]]:
+    """The command line and environment of one child: ``case`` timed with the package under ``src``."""
     if args.own_config:  # CONFIG of the checkout that ``src`` belongs to
         results, config, run, gaussians = case.split(":")
         case = ":".join([results, str(src.parent / config), run, gaussians])
-    env = {**os.environ, "PYTHONPATH": str(src), "OMP_WAIT_POLICY": "PASSIVE"}
+    env = {**os.environ, "PYTHONPATH": str(src)}
+    if args.omp_wait_policy != "inherit":
+        env["OMP_WAIT_POLICY"] = args.omp_wait_policy.upper()
     cmd = [sys.executable, str(Path(__file__).resolve()), "--child", "--case", case, "--threads", str(args.threads),
            "--steps", str(args.steps), "--warm", str(args.warm)]  # fmt: skip
+    if args.lockstep:
+        cmd.append("--lockstep")
+    return cmd, env
+
+
+def run_child(src: Path, case: str, args: argparse.Namespace) -> dict:
+    cmd, env = child_command(src, case, args)
     proc = subprocess.run(cmd, env=env, capture_output=True, text=True, check=False, cwd=REPO)
     if proc.returncode != 0:
         raise SystemExit(f"{src}: {case} failed:\n{proc.stderr[-2000:]}")
     return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def run_lockstep(trees: list[tuple[str, Path]], case: str, args: argparse.Namespace) -> dict[str, dict]:
+    """Every tree's child started at once and stepped in turn, one step each, the first alternating, so that the
+    builds' steps are compared within ~a step of each other (the host's speed drifts over seconds; docs/rasterizer.md).
+    A child waits on its pipe between its steps, its threads idle: ``args.gap`` seconds pass before each step so that
+    an idle team has gone to sleep and no spinning thread of one build runs under the other's step."""
+    procs = {}
+    try:
+        for name, src in trees:
+            cmd, env = child_command(src, case, args)
+            procs[name] = subprocess.Popen(cmd, env=env, cwd=REPO, text=True, stdin=subprocess.PIPE,
+                                           stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
+        for name, p in procs.items():
+            if p.stdout.readline().strip() != "ready":
+                raise SystemExit(f"{name}: {case} failed:\n{p.communicate()[1][-2000:]}")
+        names = [name for name, _ in trees]
+        for i in range(args.steps):
+            for name in names if i % 2 == 0 else reversed(names):
+                time.sleep(args.gap)
+                procs[name].stdin.write("step\n")
+                procs[name].stdin.flush()
+                if not procs[name].stdout.readline().strip():
+                    raise SystemExit(f"{name}: {case} failed:\n{procs[name].communicate()[1][-2000:]}")
+        out = {}
+        for name, p in procs.items():
+            stdout, stderr = p.communicate("stop\n")
+            if p.returncode != 0:
+                raise SystemExit(f"{name}: {case} failed:\n{stderr[-2000:]}")
+            out[name] = json.loads(stdout.strip().splitlines()[-1])
+        return out
+    finally:
+        for p in procs.values():
+            if p.poll() is None:
+                p.kill()
 
 
 def main() -> None:
@@ -116,6 +171,13 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=20, help="timed steps per child (the median is kept)")
     ap.add_argument("--warm", type=int, default=5, help="untimed steps first")
     ap.add_argument("--own-config", action="store_true", help="each revision's own CONFIG (default: this tree's)")
+    ap.add_argument("--omp-wait-policy", choices=("inherit", "passive", "active"), default="inherit",
+                    help="the children's OMP_WAIT_POLICY (inherit: this environment's, as `eigs train` runs; "
+                    "passive: idle threads sleep at once, ~70 µs to wake a team on this VM)")  # fmt: skip
+    ap.add_argument("--lockstep", action="store_true",
+                    help="run the trees' children at once, stepping them in turn (one step each, alternating; "
+                    "not with --omp-wait-policy active, whose idle threads spin without end)")  # fmt: skip
+    ap.add_argument("--gap", type=float, default=0.05, help="with --lockstep: seconds idle before each step")
     ap.add_argument("--work", type=Path, default=Path("/tmp/eigs-step-ab"), help="where the worktrees go")
     ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     from bench._report import add_out_argument, table, write_section
@@ -133,11 +195,15 @@ def main() -> None:
     for rnd in range(args.rounds):
         order = list(trees.items()) if rnd % 2 == 0 else list(reversed(trees.items()))
         for case in cases:
+            results = run_lockstep(order, case, args) if args.lockstep else None
             for name, src in order:
-                res = run_child(src, case, args)
+                res = results[name] if results else run_child(src, case, args)
                 ms.setdefault((name, case), []).append(res["ms"])
                 meta[case] = res
                 print(f"round {rnd + 1} {case} {name}: {res['ms']:.1f} ms", flush=True)
+    inherit = args.omp_wait_policy == "inherit"
+    policy_name = (os.environ.get("OMP_WAIT_POLICY", "unset") if inherit else args.omp_wait_policy).lower()
+    policy = f"`{policy_name}`" + (" (the environment's)" if inherit else "")
     rows = []
     for case in cases:
         _, config, run, _ = case.split(":")
@@ -155,8 +221,11 @@ def main() -> None:
         f"older revisions built from their own sources, "
         + ("each with the run's options of its own config file" if args.own_config else
            "all with the run's options of this tree's config file")
-        + f", interleaved: {args.rounds} rounds, each a fresh process per "
-        f"(revision, case) timing the median of {args.steps} steps after {args.warm} untimed ones; the table gives "
+        + f", OpenMP wait policy {policy}, interleaved: {args.rounds} rounds, each a fresh process per "
+        f"(revision, case) timing the median of {args.steps} steps after {args.warm} untimed ones"
+        + (f" (the revisions' processes run at once and take their steps in turn, one each, {args.gap:g} s apart)"
+           if args.lockstep else "")
+        + "; the table gives "
         "the median over the rounds and the range of the per-round ratios (`bench/step_ab.py`).\n\n"
         + table(cols, rows) + "\n"
     )  # fmt: skip
@@ -166,7 +235,8 @@ def main() -> None:
         else ("step-ab", "Training step against older revisions (issue 46)")
     )
     write_section(name, title, body,
-                  data={"cases": cases, "ms": {f"{k[0]}|{k[1]}": v for k, v in ms.items()}}, out=args.out)  # fmt: skip
+                  data={"cases": cases, "omp_wait_policy": policy_name, "threads": args.threads,
+                        "ms": {f"{k[0]}|{k[1]}": v for k, v in ms.items()}}, out=args.out)  # fmt: skip
     print(body)
 
 
