@@ -37,7 +37,14 @@ def child(args: argparse.Namespace) -> None:
     import yaml
 
     from eigs.artifacts.gaussians import GaussianCloud
-    from eigs.plan import is_field_method
+
+    try:
+        from eigs.plan import is_field_method
+    except ImportError:  # before eigs.plan (2026-11-27): the field methods were these
+
+        def is_field_method(method: str) -> bool:
+            return method in ("nerf", "deblur-nerf", "edi-nerf", "e2nerf")
+
     from eigs.train.config import TrainConfig
     from eigs.train.data import load_train_data
 
