@@ -2,9 +2,10 @@
 
 Each input is the JSON a ``bench/step_ab.py --out DIR`` run writes (``DIR/step-ab-configured.json`` or
 ``DIR/step-ab.json``). A case's run gets the factor median(this tree's steps) / median(the revision's steps), the
-medians taken over the rounds (each round's value is itself a child's median step). A run measured in several inputs
-keeps the last one given, so each run can be timed against the revision its ledger rows were trained at (its
-newest one: the smallest gain, an estimate on the safe side). ``--as NEW=RUN`` gives NEW the factor of RUN (a run
+medians taken over the rounds (each round's value is itself a child's median step). A run measured in several
+inputs against the same revision pools their rounds; against another revision it keeps the last one given, so each
+run can be timed against the revision its ledger rows were trained at (its newest one: the smallest gain, an
+estimate on the safe side). ``--as NEW=RUN`` gives NEW the factor of RUN (a run
 whose scene data is not on the measuring machine, timed through a sibling that takes the same step).
 
 Run: ``.venv/bin/python bench/step_speedups.py A/step-ab-configured.json B/step-ab-configured.json
@@ -54,7 +55,11 @@ def speedups(records: list[dict], aliases: dict[str, str]) -> dict:
     """The speed-up document: per run its revision, rounds and factor (later records win; then the aliases)."""
     rounds: dict[str, dict[str, list[float]]] = {}
     for rec in records:
-        rounds.update(run_rounds(rec))
+        for run, r in run_rounds(rec).items():
+            if set(rounds.get(run, {})) == set(r):  # the same revision again: its rounds pooled
+                rounds[run] = {tree: rounds[run][tree] + r[tree] for tree in r}
+            else:
+                rounds[run] = r
     against, factors = {}, {}
     for run, r in sorted(rounds.items()):
         against[run], factors[run] = factor(r)

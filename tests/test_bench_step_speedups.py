@@ -44,6 +44,14 @@ def test_later_records_win_and_aliases_copy_a_measured_run():
     assert run_rounds(new) == {"eigs+": {"this tree": [90.0], "869d8a6": [100.0]}}
 
 
+def test_records_of_the_same_revision_pool_their_rounds():
+    a = record("04f65a8", {"eigs-b6": ([110.0, 112.0], [100.0, 100.0])})
+    b = record("04f65a8", {"eigs-b6": ([96.0, 95.0, 94.0], [100.0, 100.0, 100.0])})
+    doc = speedups([a, b], {})
+    assert doc["rounds"]["eigs-b6"]["this tree"] == [110.0, 112.0, 96.0, 95.0, 94.0]
+    assert doc["factors"] == {"eigs-b6": 0.96}  # the median of the five rounds over the median of theirs
+
+
 def test_the_written_file_is_what_schedule_reads(tmp_path):
     a, b = tmp_path / "a.json", tmp_path / "b.json"
     a.write_text(json.dumps(record("357e960", {"nerf": ([72.0, 74.0], [100.0, 100.0])})))
