@@ -24,8 +24,10 @@ import os
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -139,15 +141,24 @@ def run_lockstep(trees: list[tuple[str, Path]], case: str, args: argparse.Namesp
     builds' steps are compared within ~a step of each other (the host's speed drifts over seconds; docs/rasterizer.md).
     A child waits on its pipe between its steps, its threads idle: ``args.gap`` seconds pass before each step so that
     an idle team has gone to sleep and no spinning thread of one build runs under the other's step."""
-    procs = {}
+    procs: dict[str, subprocess.Popen] = {}
+    logs: dict[str, Any] = {}  # each child's stderr, in a file (a pipe left unread could fill and stall it)
+
+    def failed(name: str) -> SystemExit:
+        procs[name].kill()
+        procs[name].wait()
+        logs[name].seek(0)
+        return SystemExit(f"{name}: {case} failed:\n{logs[name].read()[-2000:]}")
+
     try:
         for name, src in trees:
             cmd, env = child_command(src, case, args)
+            logs[name] = tempfile.TemporaryFile("w+")
             procs[name] = subprocess.Popen(cmd, env=env, cwd=REPO, text=True, stdin=subprocess.PIPE,
-                                           stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
+                                           stdout=subprocess.PIPE, stderr=logs[name])  # fmt: skip
         for name, p in procs.items():
             if p.stdout.readline().strip() != "ready":
-                raise SystemExit(f"{name}: {case} failed:\n{p.communicate()[1][-2000:]}")
+                raise failed(name)
         names = [name for name, _ in trees]
         for i in range(args.steps):
             for name in names if i % 2 == 0 else reversed(names):
@@ -155,18 +166,20 @@ def run_lockstep(trees: list[tuple[str, Path]], case: str, args: argparse.Namesp
                 procs[name].stdin.write("step\n")
                 procs[name].stdin.flush()
                 if not procs[name].stdout.readline().strip():
-                    raise SystemExit(f"{name}: {case} failed:\n{procs[name].communicate()[1][-2000:]}")
+                    raise failed(name)
         out = {}
         for name, p in procs.items():
-            stdout, stderr = p.communicate("stop\n")
+            stdout, _ = p.communicate("stop\n")
             if p.returncode != 0:
-                raise SystemExit(f"{name}: {case} failed:\n{stderr[-2000:]}")
+                raise failed(name)
             out[name] = json.loads(stdout.strip().splitlines()[-1])
         return out
     finally:
-        for p in procs.values():
+        for name, p in procs.items():
             if p.poll() is None:
                 p.kill()
+                p.wait()
+            logs[name].close()
 
 
 def main() -> None:
