@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import Any
 
 REPO = Path(__file__).resolve().parents[1]
+OURS = "this tree"  # the name of the tree this script runs in, in the output and its records
 
 
 def child(args: argparse.Namespace) -> None:
@@ -209,7 +210,7 @@ def main() -> None:
         return
     cases = args.case or ["results/toy:config/toy.yaml:eigs+:0"]
     args.work.mkdir(parents=True, exist_ok=True)
-    trees = {"this tree": REPO / "src", **{rev: checkout(rev, args.work) / "src" for rev in args.against}}
+    trees = {OURS: REPO / "src", **{rev: checkout(rev, args.work) / "src" for rev in args.against}}
     ms: dict[tuple[str, str], list[float]] = {}
     meta: dict[str, dict] = {}
     for rnd in range(args.rounds):
@@ -228,10 +229,10 @@ def main() -> None:
     for case in cases:
         _, config, run, _ = case.split(":")
         m = meta[case]
-        ours = statistics.median(ms[("this tree", case)])
+        ours = statistics.median(ms[(OURS, case)])
         for rev in args.against:
             theirs = statistics.median(ms[(rev, case)])
-            per_round = [a / b for a, b in zip(ms[("this tree", case)], ms[(rev, case)], strict=True)]
+            per_round = [a / b for a, b in zip(ms[(OURS, case)], ms[(rev, case)], strict=True)]
             rows.append([f"`{run}` ({Path(case.split(':')[0]).name})", f"{m['width']}×{m['height']}",
                          f"{m['gaussians']:,}", f"`{rev}`", f"{theirs:.1f}", f"{ours:.1f}", f"{ours / theirs:.2f}",
                          f"{min(per_round):.2f}–{max(per_round):.2f}"])  # fmt: skip

@@ -24,7 +24,9 @@ import sys
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-OURS = "this tree"  # bench/step_ab.py's name for the tree it runs in
+sys.path.insert(0, str(REPO))
+from bench._report import _atomic_write, table, write_section  # noqa: E402
+from bench.step_ab import OURS  # noqa: E402
 
 
 def run_rounds(record: dict) -> dict[str, dict[str, list[float]]]:
@@ -116,13 +118,9 @@ def main() -> None:
     head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO, capture_output=True, text=True)
     doc = {"about": args.about, "measured_at": head.stdout.strip(), "date": records[-1].get("date"),
            "machine": records[-1].get("machine"), **doc}  # fmt: skip
-    tmp = args.out.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(doc, indent=1) + "\n")
-    tmp.replace(args.out)
+    _atomic_write(args.out, json.dumps(doc, indent=1) + "\n")
     print(", ".join(f"{r} {f:.2f} (vs {doc['against'][r]})" for r, f in doc["factors"].items()))
     if args.section:
-        from bench._report import table, write_section
-
         cols = ["run", "against", "ms then", "ms now", "now / then", "per round"]
         intro = (
             "Each run's training step (`Trainer.train_step`, `bench/step_ab.py`), this tree against the revision "
@@ -134,5 +132,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    sys.path.insert(0, str(REPO))
     main()
