@@ -11,8 +11,11 @@ import pytest
 # The child allocates, touches and frees a tensor of SIZE bytes per round, alternating with one of 17.4 MB (an ADE
 # activation at 17k Gaussians), and prints its minor page faults per round. SIZE is above the 32 MB that glibc's
 # mmap threshold can ever reach, so with glibc's defaults the block is mmapped and unmapped every round, whatever
-# the heap's history: every page faults again.
+# the heap's history: every page faults again. Tuned, the heap still grows for the first rounds while glibc's bins
+# settle (5-7 rounds of 10,240 faults here, glibc 2.36; the CI check once counted them in: 5,120 per round over
+# 10), then stays put: the child warms up WARMUP rounds before it counts.
 SIZE = 40 * 2**20
+WARMUP = 30
 CHILD = f"""
 import resource, sys, torch
 from eigs.util.memory import keep_freed_memory
@@ -22,7 +25,8 @@ def faults():
 def round_():  # torch.ones writes every page of its result
     torch.ones({SIZE} // 4)
     torch.ones(17_000, 256)
-round_()
+for _ in range({WARMUP}):
+    round_()
 f = faults()
 for _ in range(10):
     round_()
@@ -43,5 +47,5 @@ def test_freed_memory_is_reused_without_page_faults():
     assert before >= 0.9 * PAGES, f"only {before:.0f} faults per round with glibc's defaults (expected ≥ {PAGES})"
     tuned, after = faults_per_round(True)
     assert tuned == "True"
-    # measured (glibc 2.36): 13,640 faults per round with the defaults, 1,024–3,072 tuned
-    assert after <= 0.4 * before, f"{after:.0f} page faults per round tuned vs {before:.0f} with glibc's defaults"
+    # measured (glibc 2.36): 13,640 faults per round with the defaults, 0 tuned once warm
+    assert after <= 0.05 * before, f"{after:.0f} page faults per round tuned vs {before:.0f} with glibc's defaults"
