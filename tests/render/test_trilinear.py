@@ -50,3 +50,31 @@ def test_only_the_asked_gradient_is_computed_and_the_reference_runs_off_float32(
     (v_grid,) = torch.autograd.grad(out.sum(), (g32,))
     assert torch.allclose(v_grid.sum(), torch.tensor(float(len(u) * 2)), rtol=1e-5)  # the weights sum to 1
     assert torch.equal(trilinear(grid, u), trilinear_reference(grid, u))  # float64: grid_sample itself
+
+
+def test_channels_last_grid_is_read_in_place_and_its_gradient_keeps_the_layout() -> None:
+    """A channels-last grid (the training grid's layout) gives the same values and gradient as a contiguous one,
+    bit for bit; its gradient comes back channels last (no copy), and the first-k-channels read without autograd
+    equals the reference on those channels."""
+    grid, u = case(4, (6, 5, 7), 400, seed=5)
+    v = torch.randn((len(u), 4), generator=torch.Generator().manual_seed(4))
+    plain = grid.float()
+    last = plain.contiguous(memory_format=torch.channels_last_3d)
+    assert not last.is_contiguous()
+    out_plain, g_plain, _ = grads(trilinear, plain, u.float(), v)
+    out_last, g_last, _ = grads(trilinear, last, u.float(), v)
+    assert torch.equal(out_plain, out_last) and torch.equal(g_plain, g_last)
+    leaf = last.clone().requires_grad_()
+    trilinear(leaf, u.float()).backward(v)
+    assert leaf.grad.is_contiguous(memory_format=torch.channels_last_3d)
+    ref = trilinear_reference(grid[:, :1], u)
+    with torch.no_grad():
+        for g in (last, plain, leaf):  # in place (channels last) and copied (contiguous); with a grad-requiring leaf
+            got = trilinear(g, u.float(), channels=1)
+            assert got.shape == (len(u), 1)
+            assert (got.double() - ref).abs().max().item() <= 2e-5 * max(ref.abs().max().item(), 1.0)
+    got = trilinear(leaf, u.float(), channels=2)  # with autograd: the channels are sliced off, the gradient flows
+    (v_leaf,) = torch.autograd.grad(got.sum(), (leaf,))
+    assert v_leaf[:, 2:].abs().max().item() == 0.0 and v_leaf[:, :2].abs().max().item() > 0.0
+    with pytest.raises(ValueError, match="channels"):
+        trilinear(last, u.float(), channels=5)

@@ -4,6 +4,7 @@ TV formula in float64, the warp's grid (finer core corners, seeding through the 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import torch
 
 from eigs.train.catalog import METHODS, field_methods
@@ -18,11 +19,13 @@ def _model(opts: FieldOptions, points=None, colours=None) -> FieldModel:
     return FieldModel(lo, hi, 3, opts, torch.device("cpu"), points=points, colours=colours)
 
 
-def test_in_place_tv_gradient_matches_autograd_of_the_tv_formula():
+@pytest.mark.parametrize("layout", [torch.contiguous_format, torch.channels_last_3d])
+def test_in_place_tv_gradient_matches_autograd_of_the_tv_formula(layout):
+    """Both layouts: channels last (the training grid's, tv_grad_channels_last_) and contiguous (tv_grad_)."""
     m = _model(FieldOptions(voxels_start=9 * 10 * 6, core_ratio=1.0, init_from_points=False))
     g = torch.Generator().manual_seed(0)
-    grid = torch.randn(m.grid.shape, generator=g, dtype=torch.float64)
-    base = torch.randn(m.grid.shape, generator=g, dtype=torch.float64)  # a data-term gradient already there
+    grid = torch.randn(m.grid.shape, generator=g, dtype=torch.float64).contiguous(memory_format=layout)
+    base = torch.randn(m.grid.shape, generator=g, dtype=torch.float64).contiguous(memory_format=layout)  # data term
     w_d, w_c = 0.3, 0.07
     # reference: autograd of w_d · TV(density) + w_c · TV(colour) in float64 (mean squared neighbour differences)
     ref_grid = grid.clone().requires_grad_(True)
@@ -75,3 +78,23 @@ def test_every_field_method_has_a_default_budget_that_eigs_train_uses():
         assert train_config({"method": m}, steps=12).steps == 12  # --steps wins
         assert train_config({}, method_name=m).steps == 800  # --method with the method's budget
     assert train_config({"method": "3dgs"}).steps == TrainConfig().steps == METHODS["3dgs"].steps
+
+
+@pytest.mark.parametrize(("w_d", "w_c"), [(1e-2, 1e-3), (0.0, 1e-3), (1e-2, 0.0)])
+def test_channels_last_tv_gradient_is_the_per_slice_gradient_bit_for_bit(w_d, w_c):
+    """float32, as training runs: the channels-last path gives the contiguous path's gradient exactly (the same
+    float32 operations per entry) and its value to float32 rounding; a zero weight leaves its channels untouched."""
+    m = _model(FieldOptions(voxels_start=11 * 9 * 7, core_ratio=1.0, init_from_points=False))
+    g = torch.Generator().manual_seed(1)
+    grid = torch.randn(m.grid.shape, generator=g)
+    base = torch.randn(m.grid.shape, generator=g)
+    out = {}
+    for layout in (torch.contiguous_format, torch.channels_last_3d):
+        m.grid = grid.clone(memory_format=layout).requires_grad_(True)
+        m.grid.grad = base.clone(memory_format=layout)
+        out[layout] = (m.add_total_variation_grad(w_d, w_c), m.grid.grad.contiguous())
+    (v_plain, g_plain), (v_last, g_last) = out.values()
+    assert torch.equal(g_plain, g_last)
+    assert abs(v_last - v_plain) <= 1e-6 * abs(v_plain)
+    for ch, w in ((slice(0, 1), w_d), (slice(1, None), w_c)):
+        assert torch.equal(g_last[:, ch], base[:, ch]) == (w == 0.0)

@@ -69,16 +69,19 @@ def test_finite_grads_finds_every_non_finite_entry() -> None:
     params = [torch.zeros(s, requires_grad=True) for s in [(1000, 3), (7,), (256, 256), (0, 3), (5, 1, 3)]]
     for p in params:
         p.grad = torch.randn(p.shape, generator=g) * 1e30
+    grid = torch.zeros((1, 4, 3, 5, 6), requires_grad=True)  # a field's grid gradient: channels last, not contiguous
+    grid.grad = torch.randn(grid.shape, generator=g).contiguous(memory_format=torch.channels_last_3d)
+    params.append(grid)
     params.append(torch.zeros(3, requires_grad=True))  # no gradient
     assert finite_grads(params)
-    for i in (0, 1, 2, 4):
+    for i in (0, 1, 2, 4, 5):
         for bad in (float("nan"), float("inf"), -float("inf")):
-            flat = params[i].grad.view(-1)
-            k = int(torch.randint(flat.numel(), (1,), generator=g))
-            keep = float(flat[k])
-            flat[k] = bad
+            grad = params[i].grad
+            k = tuple(int(torch.randint(n, (1,), generator=g)) for n in grad.shape)
+            keep = float(grad[k])
+            grad[k] = bad
             assert not finite_grads(params), (i, bad)
-            flat[k] = keep
+            grad[k] = keep
     assert finite_grads(params) and finite_grads([])
 
 

