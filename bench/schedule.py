@@ -22,6 +22,7 @@ import io
 import json
 import math
 import re
+import subprocess
 from pathlib import Path
 
 import yaml
@@ -117,6 +118,7 @@ def read_benchmark(path: Path) -> tuple[float, float | None]:
     return wall, cpu
 
 
+REPO = Path(__file__).resolve().parents[1]  # the repository whose history jobs.csv's commits are in
 TRAIN_BENCHMARK = re.compile(r"^train/(?P<scene>.+)_b(?P<bins>\d+)_(?P<run>[^_/]+)$")
 
 
@@ -183,13 +185,44 @@ def load_speedups(path: Path) -> dict[str, float]:
     return factors
 
 
-def sped_up(times: dict[str, float], factors: dict[str, float]) -> dict[str, float]:
-    """``times`` with every training job of a run in ``factors`` scaled by its factor (keys ``train:SCENE:RUN``)."""
+def speedups_measured_at(path: Path) -> str | None:
+    """The commit a speed-up file's "now" was measured at (its ``measured_at``), or None when it names none."""
+    try:
+        commit = json.loads(Path(path).read_text()).get("measured_at")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return str(commit) if commit else None
+
+
+def jobs_trained_since(directory: Path, commit: str, repo: Path = REPO) -> set[str]:
+    """Training jobs of a ledger's ``jobs.csv`` recorded at ``commit`` or at a commit after it (``git merge-base
+    --is-ancestor`` in ``repo``): their times are already today's, and a speed-up factor measured at ``commit`` does
+    not apply to them. Empty without a jobs.csv; a commit git does not know counts as older."""
+    path = Path(directory) / "jobs.csv"
+    if not path.exists():
+        return set()
+    known: dict[str, bool] = {}
+
+    def since(c: str) -> bool:
+        if c not in known:
+            same = c.startswith(commit) or commit.startswith(c)
+            known[c] = same or subprocess.run(["git", "-C", str(repo), "merge-base", "--is-ancestor", commit, c],
+                                              capture_output=True).returncode == 0  # fmt: skip
+        return known[c]
+
+    with path.open(newline="") as f:
+        return {r["job"] for r in csv.DictReader(f) if r.get("job", "").startswith("train:") and r.get("commit")
+                and since(r["commit"])}  # fmt: skip
+
+
+def sped_up(times: dict[str, float], factors: dict[str, float], current: set[str] | None = None) -> dict[str, float]:
+    """``times`` with every training job of a run in ``factors`` scaled by its factor (keys ``train:SCENE:RUN``),
+    except the jobs in ``current`` (trained with code as new as the factors' "now": :func:`jobs_trained_since`)."""
     out = dict(times)
     for j, t in times.items():
         rule, _, rest = j.partition(":")
         run = rest.split(":", 1)[-1]
-        if rule == "train" and run in factors:
+        if rule == "train" and run in factors and j not in (current or set()):
             out[j] = t * factors[run]
     return out
 
@@ -255,10 +288,14 @@ def main() -> None:
     times = {j: seconds(args.directory, jobs[j][0], est, args.column, jobs[j][2]) for j in jobs}
     if args.speedups is not None:
         try:
-            times = sped_up(times, load_speedups(args.speedups))
+            factors = load_speedups(args.speedups)
         except LedgerError as err:
             raise SystemExit(f"schedule.py: error: {err}") from None
-        print(f"training times scaled by the step speed-ups of {args.speedups} (an estimate)")
+        since = speedups_measured_at(args.speedups)
+        current = jobs_trained_since(args.directory, since) if since and args.directory is not None else set()
+        times = sped_up(times, factors, current)
+        print(f"training times scaled by the step speed-ups of {args.speedups} (an estimate), except {len(current)} "
+              f"training jobs trained at or after {since}")  # fmt: skip
     print(f"{len(jobs)} jobs, {sum(times.values()) / 3600:.2f} h of job time in total")
     for c in args.cores:
         print(f"--cores {c}: {simulate(jobs, times, c) / 3600:.2f} h")

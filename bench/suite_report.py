@@ -24,7 +24,16 @@ import yaml
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench._report import machine, table  # noqa: E402
 from bench.plateau_reference import reference_dir  # noqa: E402
-from bench.schedule import LedgerError, job_time, jobs_of, load_speedups, simulate, sped_up  # noqa: E402
+from bench.schedule import (  # noqa: E402
+    LedgerError,
+    job_time,
+    jobs_of,
+    jobs_trained_since,
+    load_speedups,
+    simulate,
+    sped_up,
+    speedups_measured_at,
+)
 from eigs.util.atomic import atomic_path  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
@@ -177,14 +186,19 @@ def main() -> None:
         cols = ["cores", "hours"]
         note = ""
         if factors is not None:
-            scaled = sped_up(cpu_times, factors)
+            since = speedups_measured_at(args.speedups)
+            current = jobs_trained_since(args.directory, since) if since else set()
+            scaled = sped_up(cpu_times, factors, current)
             for row, c in zip(sched, (1, 2, 8), strict=True):
                 row.append(f"{simulate(jobs, scaled, c) / 3600:.2f}")
             cols.append("hours, today's step")
             shown = ", ".join(f"`{r}` {f:.2f}" for r, f in sorted(factors.items()))
             note = (f" `hours, today's step`: an estimate, every training job's recorded time multiplied by its run's "
                     f"step-time ratio today / when the ledger was trained, measured by bench/step_ab.py "
-                    f"(`{args.speedups.name}`; runs not listed unchanged): {shown}.")  # fmt: skip
+                    f"(`{args.speedups.name}`; runs not listed unchanged"
+                    + (f", and the {len(current)} training jobs trained at or after `{since}`, the code the ratios' "
+                       "\"today\" was measured with, as recorded" if current else "")
+                    + f"): {shown}.")  # fmt: skip
         md += ["## Schedule\n", "`snakemake --cores N all` simulated from the per-job CPU times (bench/schedule.py: a "
                "job starts when its inputs exist and its threads are free, longest remaining path first)"
                + (f"; the {' and '.join(sorted({j.split(':', 1)[0] for j in missing}))} jobs not measured, counted as "

@@ -392,6 +392,44 @@ def test_speedups_scale_only_the_listed_runs_trainings(tmp_path):
             schedule.load_speedups(bad)
 
 
+def test_speedups_skip_the_jobs_trained_at_or_after_their_measurement(tmp_path):
+    """A factor (now / then, "now" measured at commit M) scales the jobs trained before M only: jobs recorded at M or
+    at a descendant of it are already today's (a scratch git repository: A <- M <- B)."""
+    import subprocess
+
+    repo = tmp_path / "repo"
+    repo.mkdir()
+
+    def git(*a: str) -> str:
+        return subprocess.run(["git", "-C", str(repo), *a], check=True, capture_output=True, text=True).stdout.strip()
+
+    git("init", "-q")
+    commits = []
+    for name in ("a", "m", "b"):
+        git("-c", "user.name=t", "-c", "user.email=t@t", "commit", "-q", "--allow-empty", "-m", name)
+        commits.append(git("rev-parse", "HEAD"))
+    a, m, b = commits
+    ledger = tmp_path / "ledger"
+    ledger.mkdir()
+    with (ledger / "jobs.csv").open("w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["job", "benchmark", "wall_s", "cpu_s", "threads", "machine", "commit", "date"])
+        for job, c in (("train:x:nerf", a), ("train:y:nerf", m[:7]), ("train:z:nerf", b), ("sfm:x:4", b),
+                       ("train:w:nerf", "0" * 40)):  # fmt: skip
+            w.writerow([job, "", 1, 1, 1, "pc, 2 cores", c, "2026-12-01"])
+    current = schedule.jobs_trained_since(ledger, m[:7], repo=repo)
+    assert current == {"train:y:nerf", "train:z:nerf"}  # A before M, an unknown commit counts as older
+    times = {"train:x:nerf": 10.0, "train:y:nerf": 10.0, "train:z:nerf": 10.0, "train:w:nerf": 10.0}
+    got = schedule.sped_up(times, {"nerf": 0.5}, current)
+    assert got == {"train:x:nerf": 5.0, "train:y:nerf": 10.0, "train:z:nerf": 10.0, "train:w:nerf": 5.0}
+    assert schedule.jobs_trained_since(tmp_path, m) == set()  # no jobs.csv
+    doc = tmp_path / "s.json"
+    doc.write_text(json.dumps({"factors": {"nerf": 0.5}, "measured_at": m[:7]}))
+    assert schedule.speedups_measured_at(doc) == m[:7]
+    doc.write_text(json.dumps({"factors": {"nerf": 0.5}}))
+    assert schedule.speedups_measured_at(doc) is None
+
+
 def test_suite_report_adds_the_schedule_with_the_speedups(workflow, tmp_path, capsys, monkeypatch):
     cfg, ledger = complete_ledger(workflow, tmp_path, capsys)
     speed = tmp_path / "speed.json"
