@@ -35,6 +35,13 @@ OURS = "this tree"  # the name of the tree this script runs in, in the output an
 
 def child(args: argparse.Namespace) -> None:
     """Time one case with the package on ``sys.path`` (the checkout under test): prints one JSON line."""
+    try:  # the process set-up `eigs` does before torch loads, as far as the revision has it
+        from eigs.util import memory
+    except ImportError:
+        memory = None
+    for setup in ("keep_freed_memory", "use_huge_pages"):
+        if hasattr(memory, setup):
+            getattr(memory, setup)()
     import numpy as np
     import torch
     import yaml

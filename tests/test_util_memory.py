@@ -1,10 +1,13 @@
-"""keep_freed_memory: a step's large temporaries reuse the process's pages instead of faulting new ones."""
+"""eigs.util.memory: a step's large temporaries reuse the process's pages instead of faulting new ones (keep_freed_memory), and
+large tensors lie on huge pages (use_huge_pages)."""
 
 from __future__ import annotations
 
+import os
 import platform
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -49,3 +52,37 @@ def test_freed_memory_is_reused_without_page_faults():
     assert tuned == "True"
     # measured (glibc 2.36): 13,640 faults per round with the defaults, 0 tuned once warm
     assert after <= 0.05 * before, f"{after:.0f} page faults per round tuned vs {before:.0f} with glibc's defaults"
+
+
+THP = Path("/sys/kernel/mm/transparent_hugepage/enabled")
+HUGE_CHILD = """
+import sys
+from pathlib import Path
+from eigs.util.memory import keep_freed_memory, use_huge_pages
+keep_freed_memory()
+applies = use_huge_pages()
+import torch
+t = torch.ones(64 * 2**20 // 4)  # 64 MB, every page written
+kb = [int(l.split()[1]) for l in open("/proc/self/smaps_rollup") if l.startswith("AnonHugePages:")][0]
+print(applies, use_huge_pages(), kb)
+"""
+
+
+def huge_kb(env: dict[str, str]) -> tuple[str, str, int]:
+    out = subprocess.run([sys.executable, "-c", HUGE_CHILD], capture_output=True, text=True, check=True,
+                         env={**os.environ, **env}).stdout.split()  # fmt: skip
+    return out[0], out[1], int(out[2])
+
+
+@pytest.mark.skipif(not THP.exists() or "[never]" in THP.read_text(), reason="no transparent huge pages (Linux only)")
+def test_large_tensors_get_huge_pages_and_the_environment_can_say_no():
+    """use_huge_pages before torch: a 64 MB tensor lies on 2 MB pages (also with keep_freed_memory's heap-only
+    malloc); THP_MEM_ALLOC_ENABLE=0 in the environment keeps 4 kB pages (unless the kernel gives huge pages to every
+    mapping); once torch is loaded the call says it no longer applies."""
+    first, after_torch, kb = huge_kb({})
+    assert (first, after_torch) == ("True", "False")
+    assert kb >= 32 * 1024, f"only {kb} kB of the 64 MB tensor on huge pages"
+    first, _, kb = huge_kb({"THP_MEM_ALLOC_ENABLE": "0"})
+    assert first == "False"
+    if "[always]" not in THP.read_text():
+        assert kb == 0

@@ -16,7 +16,7 @@ from collections.abc import Sequence
 
 from eigs import __version__
 from eigs.errors import EigsError
-from eigs.util.memory import keep_freed_memory
+from eigs.util.memory import keep_freed_memory, use_huge_pages
 
 # subcommand name -> module path (in pipeline order). A subcommand is named for what it does and lives in the
 # package of its stage (ingest, edi, sfm, init, train, evaluate, tables are packages of those names); resources ->
@@ -89,6 +89,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         stream=sys.stderr,
     )
     keep_freed_memory()  # a step's large temporaries reuse pages instead of faulting fresh ones (eigs.util.memory)
+    use_huge_pages()  # before torch loads: large tensors on 2 MB pages (eigs.util.memory)
     sys.unraisablehook = _unraisable
     try:
         if args.threads is not None:

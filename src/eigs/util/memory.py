@@ -18,6 +18,8 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 import logging
+import os
+import sys
 
 log = logging.getLogger(__name__)
 
@@ -42,3 +44,19 @@ def keep_freed_memory() -> bool:
     ok = mallopt(M_TRIM_THRESHOLD, TRIM_THRESHOLD) == 1 and ok
     log.debug("malloc tuned to keep freed memory: %s", ok)
     return ok
+
+
+# PyTorch's CPU allocator aligns blocks of 2 MB and more to 2 MB and asks the kernel for transparent huge pages on
+# them (madvise) when this variable is 1 (c10's alloc_cpu, read once, at the first allocation)
+HUGE_PAGES_ENV = "THP_MEM_ALLOC_ENABLE"
+
+
+def use_huge_pages() -> bool:
+    """Ask for huge pages on PyTorch's large CPU tensors (``THP_MEM_ALLOC_ENABLE=1`` unless the environment sets it):
+    a 4 kB page's TLB entry covers 4 kB, a huge page's 2 MB, so random reads across a large tensor (a field's voxel
+    grid: the trilinear kernel's eight corners per sample) miss the TLB far less. Only memory placement changes, never
+    a value. It must run before torch is imported (PyTorch reads the variable once); returns whether it applies."""
+    os.environ.setdefault(HUGE_PAGES_ENV, "1")
+    applies = "torch" not in sys.modules and os.environ[HUGE_PAGES_ENV] == "1"
+    log.debug("huge pages for large tensors: %s", applies)
+    return applies
