@@ -1,5 +1,5 @@
-"""eigs.util.memory: a step's large temporaries reuse the process's pages instead of faulting new ones (keep_freed_memory), and
-large tensors lie on huge pages (use_huge_pages)."""
+"""eigs.util.memory: a step's large temporaries reuse the process's pages instead of faulting new ones
+(keep_freed_memory), and large tensors lie on huge pages (use_huge_pages)."""
 
 from __future__ import annotations
 

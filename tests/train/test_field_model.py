@@ -21,7 +21,7 @@ def _model(opts: FieldOptions, points=None, colours=None) -> FieldModel:
 
 @pytest.mark.parametrize("layout", [torch.contiguous_format, torch.channels_last_3d])
 def test_in_place_tv_gradient_matches_autograd_of_the_tv_formula(layout):
-    """Both layouts: channels last (the training grid's, tv_grad_channels_last_) and contiguous (tv_grad_)."""
+    """Both layouts: channels last (the training grid's, grid_tv_grad_) and contiguous (tv_grad_)."""
     m = _model(FieldOptions(voxels_start=9 * 10 * 6, core_ratio=1.0, init_from_points=False))
     g = torch.Generator().manual_seed(0)
     grid = torch.randn(m.grid.shape, generator=g, dtype=torch.float64).contiguous(memory_format=layout)
@@ -98,3 +98,30 @@ def test_channels_last_tv_gradient_is_the_per_slice_gradient_bit_for_bit(w_d, w_
     assert abs(v_last - v_plain) <= 1e-6 * abs(v_plain)
     for ch, w in ((slice(0, 1), w_d), (slice(1, None), w_c)):
         assert torch.equal(g_last[:, ch], base[:, ch]) == (w == 0.0)
+
+
+@pytest.mark.parametrize("groups", [[(0, 1, 1e-2 / 3), (1, 4, 1e-3 / 3)], [(0, 1, 0.0), (1, 4, 0.3)],
+                                    [(0, 1, 0.2), (1, 2, 0.0), (2, 4, 0.1)], [(0, 4, 0.0)]])  # fmt: skip
+@pytest.mark.parametrize("threads", [1, 2])
+def test_grid_tv_kernel_equals_its_tensor_op_reference_bit_for_bit(groups, threads):
+    """The kernel against grid_tv_grad_reference_ on a channels-last float32 grid with an existing gradient: the same
+    gradient bit for bit (groups with zero weight, one with a gap between live groups, an axis of one voxel), the
+    value to float32 rounding, at one and two threads."""
+    from eigs.losses.grid_tv import grid_tv_grad_, grid_tv_grad_reference_
+
+    g = torch.Generator().manual_seed(2)
+    for shape in ((13, 9, 11, 4), (1, 7, 5, 4)):
+        x = torch.randn(shape, generator=g)
+        base = torch.randn(shape, generator=g)
+        ref, got = base.clone(), base.clone()
+        before = torch.get_num_threads()
+        torch.set_num_threads(threads)
+        try:
+            v_ref = grid_tv_grad_reference_(x, ref, groups)
+            v_got = grid_tv_grad_(x, got, groups)
+        finally:
+            torch.set_num_threads(before)
+        assert torch.equal(got, ref), shape
+        assert abs(v_got - v_ref) <= 1e-6 * max(abs(v_ref), 1e-30), shape
+        if all(w == 0 for _, _, w in groups):
+            assert v_got == 0.0 and torch.equal(got, base)

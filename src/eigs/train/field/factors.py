@@ -42,39 +42,6 @@ def tv_grad_(x: Tensor, gx: Tensor, w: float, dims: tuple[int, ...] | list[int])
     return total
 
 
-def tv_grad_channels_last_(x: Tensor, gx: Tensor, groups: list[tuple[int, int, float]]) -> float:
-    """:func:`tv_grad_` over the three spatial axes of a channels-last grid ``x`` (Z, Y, X, C) (contiguous) for
-    channel groups ``(first, stop, w)``, each its own mean: adds to ``gx`` (same layout) the gradient of Σ_groups
-    w · Σ_axes mean((neighbour differences of the group's channels)²) and returns that value.
-
-    Every channel of a group with w > 0 gets the same float32 operations in the same order as :func:`tv_grad_` on
-    that group alone (difference, times 2·scale rounded to float32, added to the later neighbour and subtracted from
-    the earlier, axis by axis), so the gradient equals its, bit for bit; all channels go through each operation at
-    once on contiguous blocks (a channel slice of a channels-last grid is strided, and PyTorch's elementwise ops
-    ran ~3× slower on it). The value (for the log) is summed in another order: equal to float32 rounding."""
-    live = [(a, b, w) for a, b, w in groups if w > 0 and b > a]
-    if not live:
-        return 0.0
-    lo, hi = min(a for a, _, _ in live), max(b for _, b, _ in live)
-    if sum(b - a for a, b, _ in live) != hi - lo:  # groups with gaps between them: one at a time
-        return sum(tv_grad_channels_last_(x, gx, [g]) for g in live)
-    x, gx = x[..., lo:hi], gx[..., lo:hi]  # the whole grid (no copy) when every channel is live
-    total = 0.0
-    for d in (0, 1, 2):
-        n = x.shape[d]
-        if n < 2:
-            continue
-        diff = x.narrow(d, 1, n - 1) - x.narrow(d, 0, n - 1)  # (…, C') contiguous
-        twice = torch.empty(hi - lo, dtype=x.dtype)
-        for a, b, w in live:
-            twice[a - lo : b - lo] = 2.0 * w / diff[..., a - lo : b - lo].numel()  # rounded as mul_ rounds it
-        scaled = diff * twice.to(diff.device)
-        total += 0.5 * float(torch.dot(diff.reshape(-1), scaled.reshape(-1)))  # Σ_c scale_c · Σ diff_c²
-        gx.narrow(d, 1, n - 1).add_(scaled)
-        gx.narrow(d, 0, n - 1).sub_(scaled)
-    return total
-
-
 def vm_dims(extent: np.ndarray, voxels: int) -> tuple[int, int, int]:
     """(R_x, R_y, R_z) corner counts of a dense grid of about ``voxels`` cubic voxels over ``extent`` (3,)."""
     z, y, x = grid_shape(extent, voxels)

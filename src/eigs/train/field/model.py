@@ -17,13 +17,13 @@ from torch import Tensor
 
 from eigs.artifacts.field import FieldArrays
 from eigs.errors import EigsError
+from eigs.losses.grid_tv import grid_tv_grad_
 from eigs.render.field import CHANNELS_LAST, FieldTensors, VMFactors
 from eigs.train.field.factors import (
     grid_shape,
     grow_vm,
     make_vm,
     tv_grad_,
-    tv_grad_channels_last_,
     vm_arrays,
     vm_dims,
     vm_from_leaves,
@@ -269,7 +269,7 @@ class FieldModel:
         g, grad = self.grid[0].permute(1, 2, 3, 0), self.grid.grad[0].permute(1, 2, 3, 0)  # (Z, Y, X, 1 + C)
         groups = [(0, 1, w_density / 3.0), (1, 1 + self.channels, w_colour / 3.0)]
         if g.is_contiguous() and grad.is_contiguous():  # the grid's own layout (channels last)
-            total = tv_grad_channels_last_(g, grad, groups)
+            total = grid_tv_grad_(g, grad, groups)
         else:
             g, grad = self.grid[0], self.grid.grad[0]
             total = sum(tv_grad_(g[a:b], grad[a:b], w, (1, 2, 3)) for a, b, w in groups if w > 0)
