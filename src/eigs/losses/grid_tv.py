@@ -62,7 +62,7 @@ def grid_tv_grad_reference_(x: Tensor, gx: Tensor, groups: list[tuple[int, int, 
     operations in the same order as the field's per-slice ``tv_grad_`` on that group alone (difference, times
     2·scale rounded to the grid's dtype, added to the later neighbour and subtracted from the earlier, axis by axis),
     so the gradients are equal bit for bit; all channels go through each operation at once on contiguous blocks."""
-    live = [(a, b, w) for a, b, w in groups if w > 0 and b > a]
+    live = _live(groups)
     if not live:
         return 0.0
     lo, hi = min(a for a, _, _ in live), max(b for _, b, _ in live)

@@ -23,7 +23,6 @@ from eigs.train.field.factors import (
     grid_shape,
     grow_vm,
     make_vm,
-    tv_grad_,
     vm_arrays,
     vm_dims,
     vm_from_leaves,
@@ -262,17 +261,13 @@ class FieldModel:
     @torch.no_grad()
     def add_total_variation_grad(self, w_density: float, w_colour: float) -> float:
         """Add the gradient of ``w_density`` · TV(density) + ``w_colour`` · TV(colour) (:meth:`total_variation`'s
-        terms) to ``grid.grad`` in place (created when missing), without autograd (:func:`tv_grad_`). Returns the
-        weighted value."""
+        terms) to ``grid.grad`` in place (created when missing), without autograd
+        (:func:`eigs.losses.grid_tv.grid_tv_grad_`). Returns the weighted value."""
         if self.grid.grad is None:
             self.grid.grad = torch.zeros_like(self.grid)
-        g, grad = self.grid[0].permute(1, 2, 3, 0), self.grid.grad[0].permute(1, 2, 3, 0)  # (Z, Y, X, 1 + C)
-        groups = [(0, 1, w_density / 3.0), (1, 1 + self.channels, w_colour / 3.0)]
-        if g.is_contiguous() and grad.is_contiguous():  # the grid's own layout (channels last)
-            total = grid_tv_grad_(g, grad, groups)
-        else:
-            g, grad = self.grid[0], self.grid.grad[0]
-            total = sum(tv_grad_(g[a:b], grad[a:b], w, (1, 2, 3)) for a, b, w in groups if w > 0)
+        # (Z, Y, X, 1 + C) views: contiguous in the grid's own layout (channels last), where the kernel runs
+        g, grad = self.grid[0].permute(1, 2, 3, 0), self.grid.grad[0].permute(1, 2, 3, 0)
+        total = grid_tv_grad_(g, grad, [(0, 1, w_density / 3.0), (1, 1 + self.channels, w_colour / 3.0)])
         if self.vm is not None:
             total += vm_tv_grad_(self.vm, 0.0, self.opts.vm_tv_colour)
         return total
