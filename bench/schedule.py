@@ -1,17 +1,16 @@
 """Simulate the workflow's schedule on N cores from per-job times: how long `snakemake --cores N all` takes when the
 jobs are independent except for their inputs (synth → edi (edi_frames on `events: false` scenes) → sfm → init per
-scene and B; train → evaluate per run on the scenes eigs.plan gives it, the workflow's own run planning; tables and
-figures last). Jobs take their rule's threads (config `threads`; init, resources, evaluate, tables and
-figures 1), a job starts as soon as its inputs exist and enough cores are free, longest remaining path first.
+scene and B, the other B's sfm after the first's where it is resampled; train → evaluate per run on the scenes
+eigs.plan gives it, the workflow's own run planning; tables and figures last). Jobs take their rule's threads
+(config `threads`; init, resources, evaluate, tables and figures 1), a job starts as soon as its inputs exist and
+enough cores are free, longest remaining path first.
 
 Per-job seconds come from a finished run's Snakemake benchmark files (``DIR/benchmarks/<rule>/<name>.tsv``: the
 wall-clock ``s`` column, or with ``--column cpu_time`` the CPU seconds divided by the job's threads, which is the
-wall time the job would take alone when other work shared the cores while it ran) or, for jobs not run there,
-from ``--estimate RULE[:RUN]=SECONDS`` (e.g. ``train:eigs=318``); a job with
-neither is an error naming it.
+wall time the job would take alone when other work shared the cores while it ran) or, for jobs not run there, from
+``--estimate RULE[:RUN]=SECONDS`` (e.g. ``train:eigs=318``); a job with neither is an error naming it.
 
-Run: ``.venv/bin/python bench/schedule.py --config config/toy.yaml --directory /path/of/a/run --cores 1 2 8``
-"""
+Run: ``.venv/bin/python bench/schedule.py --config config/toy.yaml --directory /path/of/a/run --cores 1 2 8``"""
 
 from __future__ import annotations
 
@@ -59,7 +58,11 @@ def jobs_of(cfg: dict) -> dict[str, tuple[str, list[str], int]]:
                 jobs[f"edi:{s}:{b}"] = (f"edi/{s}_b{b}", [f"scene:{s}"], threads)
             else:  # rules/edi.smk edi_frames: the frames passed through, 1 thread
                 jobs[f"edi:{s}:{b}"] = (f"edi_frames/{s}_b{b}", [f"scene:{s}"], 1)
-            jobs[f"sfm:{s}:{b}"] = (f"sfm/{s}_b{b}", [f"edi:{s}:{b}"], threads)
+            base = plan.sfm_base_bins(cfg, s, b)  # rule sfm_resample: the first B's SfM read at this B's times
+            if base is None:
+                jobs[f"sfm:{s}:{b}"] = (f"sfm/{s}_b{b}", [f"edi:{s}:{b}"], threads)
+            else:
+                jobs[f"sfm:{s}:{b}"] = (f"sfm/{s}_b{b}", [f"edi:{s}:{b}", f"sfm:{s}:{base}"], 1)
             jobs[f"init:{s}:{b}"] = (f"init/{s}_b{b}", [f"sfm:{s}:{b}"], 1)
     evals = []
     for r in plan.runs(cfg):

@@ -83,11 +83,18 @@ def scene_sfm(scene):
 SFM_MODEL_SCENES = plan.sfm_scenes(config, "sfm_model")  # rule sfm_model
 SFM_GIVEN_SCENES = plan.sfm_scenes(config, "sfm_given")  # rule sfm_given
 SFM_COLMAP_SCENES = plan.sfm_scenes(config, "sfm")  # rule sfm
+SFM_SHARED_SCENES = [s for s in SFM_COLMAP_SCENES if plan.sfm_shares_bins(config, s)]  # rule sfm_resample
+SFM_BASE_BINS = plan.edi_bins(config)[0]
 
 
 def sfm_config(wildcards):
     """The scene's `sfm:` keys for `eigs sfm --config` (defaults: eigs.sfm.options.SfmConfig)."""
     return config_json(scene_sfm(wildcards.scene))
+
+
+def sfm_base(wildcards):
+    """Rule sfm_resample: the scene's SfM at the first configured B (eigs.plan.sfm_base_bins)."""
+    return f"results/{wildcards.scene}/b{plan.sfm_base_bins(config, wildcards.scene, int(wildcards.bins))}/sfm"
 
 
 def sfm_model_path(wildcards):

@@ -143,6 +143,22 @@ def sfm_scenes(config: Config, rule: str) -> list[str]:
     return [s for s in all_scenes(config) if sfm_rule(config, s) == rule]
 
 
+def sfm_shares_bins(config: Config, scene: str) -> bool:
+    """Whether the scene runs SfM at the first configured B only and reads the other B's latent poses from it (rule
+    `sfm_resample`, `eigs sfm --mode resample`): a COLMAP scene (rule `sfm`) with `sfm: share_across_bins` (default
+    eigs.sfm.options.SfmConfig)."""
+    if sfm_rule(config, scene) != "sfm":
+        return False
+    return bool(scene_sfm(config, scene).get("share_across_bins", SfmConfig().share_across_bins))
+
+
+def sfm_base_bins(config: Config, scene: str, bins: int) -> int | None:
+    """The B whose SfM the scene's SfM at ``bins`` is resampled from (:func:`sfm_shares_bins`: the first configured
+    B, at any other B); None where the job runs its own SfM."""
+    base = edi_bins(config)[0]
+    return base if bins != base and sfm_shares_bins(config, scene) else None
+
+
 # --- runs -----------------------------------------------------------------------------------------------------
 def runs(config: Config) -> dict[str, Any]:
     return config.get("runs", {})

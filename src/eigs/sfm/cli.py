@@ -24,9 +24,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--mode",
         choices=MODES,
         help=f"auto: given when the scene's latent poses are ground truth (and allowed), else colmap; model: the poses "
-        f"of an existing COLMAP model (--model DIR) (default {_D.mode})",
+        f"of an existing COLMAP model (--model DIR); resample: another B's SfM of the scene (--from DIR) read at "
+        f"this B's latent times (default {_D.mode})",
     )
     p.add_argument("--model", dest="path", metavar="DIR", help="mode model: the COLMAP sparse model (binary or text)")
+    p.add_argument("--from", dest="base", metavar="DIR",
+                   help="mode resample: the scene's sfm/ output at another B, read at this EDI's latent "
+                   "times")  # fmt: skip
     p.add_argument("--intrinsics-tolerance", type=float, metavar="T",
                    help="mode model: relative tolerance on the model's intrinsics "
                    f"(default {_D.intrinsics_tolerance})")  # fmt: skip
@@ -69,7 +73,7 @@ def options(args: argparse.Namespace) -> SfmConfig:
 
     cfg = from_command_line(SfmConfig, args.config, flags(args, accepted(SfmConfig)))
     threads = args.threads or min(2, os.cpu_count() or 1)
-    return replace(cfg, keep_work=args.keep_work, verbose=args.verbose, plot=not args.no_plot,
+    return replace(cfg, base=args.base, keep_work=args.keep_work, verbose=args.verbose, plot=not args.no_plot,
                    colmap=replace(cfg.colmap, num_threads=threads))  # fmt: skip
 
 

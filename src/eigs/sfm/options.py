@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 
 from eigs.util.options import Options, choice, run_control
 
-MODES = ("auto", "colmap", "given", "model")
+MODES = ("auto", "colmap", "given", "model", "resample")
 MATCHERS = ("auto", "exhaustive", "sequential")
 DEVICES = ("auto", "cpu", "cuda")
 
@@ -45,7 +45,10 @@ class ColmapOptions(Options):
 class SfmConfig(Options):
     """Stage options. ``mode``: auto (given when the scene's latent poses are ground truth and ``allow_given``,
     else colmap) | colmap | given | model (the poses of an existing COLMAP model at ``path``, checked against the
-    scene's K within ``intrinsics_tolerance``: eigs.sfm.model); ``min_registered_fraction``: of the images given
+    scene's K within ``intrinsics_tolerance``: eigs.sfm.model) | resample (the latent poses of the scene's SfM at
+    another B, ``base``, read at this B's latent times: eigs.sfm.resample); ``share_across_bins``: the workflow
+    runs COLMAP once per scene, at the first configured B, and resamples the other B's poses from it (false: one
+    COLMAP run per B); ``min_registered_fraction``: of the images given
     to COLMAP, below which the
     stage stops; ``interpolate_unregistered``: fill unregistered latents from registered latents of the same
     view; ``register_test_cameras``: register the ground-truth sharp images into the model (else the Sim(3)-mapped
@@ -58,6 +61,8 @@ class SfmConfig(Options):
     allow_given: bool = True
     path: str | None = None  # model mode: the COLMAP sparse model directory
     intrinsics_tolerance: float = 0.01  # model mode: relative focal, principal point (fraction of the size)
+    base: str | None = run_control(None)  # resample mode: the scene's sfm/ directory at another B (--from)
+    share_across_bins: bool = True  # workflow: COLMAP scenes run SfM at their first B only (docs/sfm.md)
     min_registered_fraction: float = 0.5
     interpolate_unregistered: bool = True
     register_test_cameras: bool = True

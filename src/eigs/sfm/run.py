@@ -1,8 +1,9 @@
-"""The SfM stage: scene + EDI latent frames → ``sfm/`` (COLMAP model, poses.h5, test_cameras.h5, report.json).
-
-Phases: choose the mode → features → matching → mapping (COLMAP mode) or fixed-pose triangulation (given
-mode) → registration check → canonical frame → fill unregistered latents within their view → accuracy
-against ground truth (accuracy.py) → test cameras (testcams.py) → write (report.json and report.png: report.py).
+"""The SfM stage: scene + EDI latent frames → ``sfm/`` (COLMAP model, poses.h5, test_cameras.h5, report.json). Mode
+resample (another B's finished SfM read at this B's latent times: resample.py) writes the same files from that SfM
+without COLMAP. Phases otherwise: choose the mode → features → matching → mapping (COLMAP mode) or fixed-pose
+triangulation (given mode) → registration check → canonical frame → fill unregistered latents within their view →
+accuracy against ground truth (accuracy.py) → test cameras (testcams.py) → write (report.json and report.png:
+report.py).
 See docs/sfm.md.
 """
 
@@ -47,7 +48,11 @@ class _Timer:
 def resolve_mode(cfg: SfmConfig, scene, path: str) -> tuple[str, str]:
     """``(mode, reason)``; raises when ``given`` is requested but the scene has no poses."""
     if cfg.mode not in MODES:
-        raise EigsError(None, f"unknown mode {cfg.mode!r} (auto, colmap, given or model)")
+        raise EigsError(None, f"unknown mode {cfg.mode!r} ({', '.join(MODES)})")
+    if cfg.mode == "resample":
+        if not cfg.base:
+            raise EigsError(path, "mode resample needs the scene's SfM at another B (sfm: base, or --from DIR)")
+        return "resample", f"requested: the latent poses of {cfg.base} at this B's latent times"
     if cfg.mode == "model":
         if not cfg.path:
             raise EigsError(path, "mode model needs the COLMAP model directory (sfm: path, or --model DIR)")
@@ -131,6 +136,8 @@ def run_sfm(
         "latent_per_view": lat.per_view,
         "sharp_views": [int(v) for v in np.flatnonzero(edi.sharp)],
     }
+    if mode == "resample":
+        return _run_resample(scene, edi, out_dir, cfg, timer, report)
     if mode == "model":
         return _run_model(scene, edi, lat, latent_dir, edi_path, out_dir, cfg, timer, report)
     with atomic_path(out_dir, directory=True) as tmp:
@@ -300,6 +307,70 @@ def _given_reconstruction(scene, scene_path, edi, db, ldir, work, lat, name_to_i
         )
     report["models"] = [len(lat.names)]
     return rec, []
+
+
+# What mode resample takes from the base as it is: the COLMAP model (init reads its points) and the test cameras.
+_BASE_FILES = ("cameras.bin", "images.bin", "points3D.bin", "frames.bin", "rigs.bin", "test_cameras.h5")
+
+
+def _run_resample(scene, edi, out_dir: Path, cfg: SfmConfig, timer: _Timer, report: dict) -> dict:
+    """Mode resample (eigs.sfm.resample): the base SfM's latent poses read at this EDI's latent times, its model and
+    test cameras copied; accuracy over every resampled pose. No features, no COLMAP."""
+    import json
+
+    from eigs.artifacts.poses import LatentPoses, read_poses, write_poses
+    from eigs.sfm.resample import resample_latent_poses
+    from eigs.util.atomic import atomic_path
+
+    base_dir = Path(cfg.base)  # type: ignore[arg-type]
+    with timer("resample"):
+        base = read_poses(base_dir)
+        cam = scene.camera
+        if base.n_views != edi.n_views:
+            raise EigsError(base_dir, f"the base SfM has {base.n_views} views, the EDI result {edi.n_views}")
+        if (base.width, base.height) != (cam.width, cam.height) or not np.allclose(base.K, cam.K, rtol=1e-9):
+            raise EigsError(base_dir, "the base SfM's camera (size or intrinsics) is not the scene's")
+        missing = [n for n in ("points3D.bin", "cameras.bin", "images.bin") if not (base_dir / n).is_file()]
+        if missing:
+            raise EigsError(base_dir, f"the base SfM has no {', '.join(missing)} (rerun its sfm)")
+        c2w, registered, interpolated = resample_latent_poses(
+            base.c2w, base.timestamps_us, base.valid, base.registered, edi.timestamps_us, edi.sharp
+        )
+    valid = np.all(np.isfinite(c2w), axis=(-2, -1))
+    report["resample"] = {
+        "base": str(base_dir),
+        "base_latent_per_view": base.n_latent,
+        "base_mode": base.mode,
+        "copied": int((valid & ~interpolated).sum()),
+        "interpolated": int(interpolated.sum()),
+    }
+    base_report = base_dir / "report.json"
+    if base_report.is_file():  # the base's own figures, for reference
+        got = json.loads(base_report.read_text())
+        report["resample"]["base_accuracy_ate_rmse"] = got.get("accuracy", {}).get("ate_rmse")
+        for key in ("points", "test_cameras"):
+            if key in got:
+                report[key] = got[key]
+    log.info("resampled %d latent poses from %s (%d at its own times, %d interpolated within their view)",
+             int(valid.sum()), base_dir, report["resample"]["copied"], report["resample"]["interpolated"])  # fmt: skip
+    no_pose = [int(v) for v in range(c2w.shape[0]) if not valid[v].all()]
+    if no_pose:
+        log.warning("views without a pose for every latent: %s", no_pose)
+    gt, est_to_gt = ground_truth_accuracy(scene, edi, c2w, valid, report)  # every pose, interpolated ones too
+    with atomic_path(out_dir, directory=True) as tmp:
+        for name in _BASE_FILES:
+            if (base_dir / name).is_file():
+                shutil.copy2(base_dir / name, tmp / name)
+        write_poses(
+            LatentPoses(c2w=c2w, timestamps_us=np.asarray(edi.timestamps_us, np.int64), registered=registered,
+                        interpolated=interpolated, sharp=np.asarray(edi.sharp, bool), K=np.asarray(base.K, np.float64),
+                        width=base.width, height=base.height, mode=base.mode, canonical=base.canonical),
+            tmp / "poses.h5",
+        )  # fmt: skip
+        report["timings_s"] = timer.times
+        write_report(tmp, report, c2w, valid, gt[0] if gt is not None else None, est_to_gt, cfg.plot)
+    log.info("wrote %s", out_dir)
+    return report
 
 
 def _colmap_reconstruction(db, ldir, work, lat, px, cfg, timer, report):
