@@ -152,6 +152,12 @@ def sfm_shares_bins(config: Config, scene: str) -> bool:
     return bool(scene_sfm(config, scene).get("share_across_bins", SfmConfig().share_across_bins))
 
 
+def sfm_job_rule(config: Config, scene: str, bins: int) -> str:
+    """The rule of the scene's SfM job at ``bins``: `sfm_resample` where :func:`sfm_base_bins` names a base, else
+    :func:`sfm_rule`."""
+    return "sfm_resample" if sfm_base_bins(config, scene, bins) is not None else sfm_rule(config, scene)
+
+
 def sfm_base_bins(config: Config, scene: str, bins: int) -> int | None:
     """The B whose SfM the scene's SfM at ``bins`` is resampled from (:func:`sfm_shares_bins`: the first configured
     B, at any other B); None where the job runs its own SfM."""
@@ -330,7 +336,7 @@ def jobs(config: Config) -> list[Job]:
     out += [Job("ingest", s) for s in ingested_scenes(config)]
     for s in scenes:
         edi = "edi" if scene_uses_events(config, s) else "edi_frames"
-        out += [Job(rule, s, b) for b in bins for rule in (edi, sfm_rule(config, s), "init")]
+        out += [Job(rule, s, b) for b in bins for rule in (edi, sfm_job_rule(config, s, b), "init")]
     training = train_jobs(config)
     out += training + [Job("evaluate", j.scene, j.bins, j.run) for j in training]
     out += [Job("video", s) for s in video_scenes(config)]

@@ -122,3 +122,21 @@ def test_the_workflow_runs_colmap_once_per_scene():
     assert [plan.sfm_base_bins(cfg, "a", b) for b in (4, 6, 8)] == [None, 4, 4]
     assert [plan.sfm_base_bins(cfg, s, 8) for s in ("b", "c")] == [None, None]
     assert plan.sfm_shares_bins(cfg, "a") and not plan.sfm_shares_bins(cfg, "c")
+
+
+def test_dry_run_schedules_colmap_once_per_scene(tmp_path):
+    """`edi: bins: [4, 6]` on a COLMAP scene: one `sfm` job (B = 4) and one `sfm_resample` job (B = 6) that reads
+    B = 4's sfm/; with share_across_bins false, two `sfm` jobs; a given-pose scene keeps `sfm_given` at every B."""
+    from tests.test_workflow_skips import job_counts, snakemake
+
+    cfg = {"scenes": {"a": {"builtin": "toy", "sfm": {"allow_given": False}}, "b": {"builtin": "toy"}},
+           "edi": {"bins": [4, 6]}, "threads": 1}  # fmt: skip
+    proc = snakemake(tmp_path, cfg, "all_sfm", "-n", "-p", "--forceall")
+    counts = job_counts(proc.stdout)
+    assert (counts.get("sfm"), counts.get("sfm_resample"), counts.get("sfm_given")) == (1, 1, 2), proc.stdout
+    cmd = next(ln for ln in proc.stdout.splitlines() if "--mode resample" in ln)
+    assert "results/a/b6/edi.h5" in cmd and "--from results/a/b4/sfm" in cmd
+    cfg["scenes"]["a"]["sfm"]["share_across_bins"] = False
+    proc = snakemake(tmp_path, cfg, "all_sfm", "-n", "-p", "--forceall")
+    counts = job_counts(proc.stdout)
+    assert (counts.get("sfm"), counts.get("sfm_resample")) == (2, None), proc.stdout
