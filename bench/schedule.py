@@ -218,6 +218,55 @@ def jobs_trained_since(directory: Path, commit: str, repo: Path = REPO) -> set[s
                 and since(r["commit"])}  # fmt: skip
 
 
+def speedups_against(path: Path) -> dict[str, str]:
+    """Run → the commit a speed-up file's ratio for it was measured against (its ``against``; empty when absent)."""
+    try:
+        doc = json.loads(Path(path).read_text()).get("against") or {}
+    except (OSError, ValueError, AttributeError):
+        return {}
+    return {str(k): str(v) for k, v in doc.items()}
+
+
+def jobs_past_their_factor(directory: Path, against: dict[str, str], repo: Path = REPO) -> set[str]:
+    """Training jobs of a ledger's ``jobs.csv`` recorded after the commit their run's factor was measured against
+    (their commit not ``against[run]`` or an ancestor of it): retrained since, they already carry part of the gain
+    the factor measures, and are left as recorded (a conservative estimate). A commit git does not know counts as
+    older, as in :func:`jobs_trained_since`."""
+    path = Path(directory) / "jobs.csv"
+    if not path.exists() or not against:
+        return set()
+    known: dict[tuple[str, str], bool] = {}
+
+    def after(c: str, base: str) -> bool:
+        if (c, base) not in known:
+            same = c.startswith(base) or base.startswith(c)
+            older = same or subprocess.run(["git", "-C", str(repo), "merge-base", "--is-ancestor", c, base],
+                                           capture_output=True).returncode == 0  # fmt: skip
+            exists = subprocess.run(["git", "-C", str(repo), "cat-file", "-e", f"{c}^{{commit}}"],
+                                    capture_output=True).returncode == 0  # fmt: skip
+            known[(c, base)] = exists and not older
+        return known[(c, base)]
+
+    out = set()
+    with path.open(newline="") as f:
+        for r in csv.DictReader(f):
+            job = r.get("job", "")
+            run = job.split(":", 2)[-1]
+            if job.startswith("train:") and run in against and r.get("commit") and after(r["commit"], against[run]):
+                out.add(job)
+    return out
+
+
+def unscaled_jobs(directory: Path | None, speedups: Path, repo: Path = REPO) -> tuple[set[str], str | None]:
+    """The training jobs a speed-up file's factors do not scale (:func:`jobs_trained_since` its ``measured_at``, and
+    :func:`jobs_past_their_factor`), and that ``measured_at``."""
+    since = speedups_measured_at(speedups)
+    if directory is None:
+        return set(), since
+    current = jobs_trained_since(directory, since, repo) if since else set()
+    return current | jobs_past_their_factor(directory, speedups_against(speedups), repo), since
+
+
 def sped_up(times: dict[str, float], factors: dict[str, float], current: set[str] | None = None) -> dict[str, float]:
     """``times`` with every training job of a run in ``factors`` scaled by its factor (keys ``train:SCENE:RUN``),
     except the jobs in ``current`` (trained with code as new as the factors' "now": :func:`jobs_trained_since`)."""
@@ -294,11 +343,11 @@ def main() -> None:
             factors = load_speedups(args.speedups)
         except LedgerError as err:
             raise SystemExit(f"schedule.py: error: {err}") from None
-        since = speedups_measured_at(args.speedups)
-        current = jobs_trained_since(args.directory, since) if since and args.directory is not None else set()
+        current, since = unscaled_jobs(args.directory, args.speedups)
         times = sped_up(times, factors, current)
         print(f"training times scaled by the step speed-ups of {args.speedups} (an estimate), except {len(current)} "
-              f"training jobs trained at or after {since}")  # fmt: skip
+              f"training jobs trained at or after {since} or after the code their run's ratio was measured "
+              "against")  # fmt: skip
     print(f"{len(jobs)} jobs, {sum(times.values()) / 3600:.2f} h of job time in total")
     for c in args.cores:
         print(f"--cores {c}: {simulate(jobs, times, c) / 3600:.2f} h")

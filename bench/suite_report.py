@@ -28,11 +28,10 @@ from bench.schedule import (  # noqa: E402
     LedgerError,
     job_time,
     jobs_of,
-    jobs_trained_since,
     load_speedups,
     simulate,
     sped_up,
-    speedups_measured_at,
+    unscaled_jobs,
 )
 from eigs.util.atomic import atomic_path  # noqa: E402
 
@@ -186,8 +185,7 @@ def main() -> None:
         cols = ["cores", "hours"]
         note = ""
         if factors is not None:
-            since = speedups_measured_at(args.speedups)
-            current = jobs_trained_since(args.directory, since) if since else set()
+            current, since = unscaled_jobs(args.directory, args.speedups)
             scaled = sped_up(cpu_times, factors, current)
             for row, c in zip(sched, (1, 2, 8), strict=True):
                 row.append(f"{simulate(jobs, scaled, c) / 3600:.2f}")
@@ -197,7 +195,8 @@ def main() -> None:
                     f"step-time ratio today / when the ledger was trained, measured by bench/step_ab.py "
                     f"(`{args.speedups.name}`; runs not listed unchanged"
                     + (f", and the {len(current)} training jobs trained at or after `{since}`, the code the ratios' "
-                       "\"today\" was measured with, as recorded" if current else "")
+                       "\"today\" was measured with, or after the code their run's ratio was measured against, as "
+                       "recorded" if current else "")
                     + f"): {shown}.")  # fmt: skip
         md += ["## Schedule\n", "`snakemake --cores N all` simulated from the per-job CPU times (bench/schedule.py: a "
                "job starts when its inputs exist and its threads are free, longest remaining path first)"

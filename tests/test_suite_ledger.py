@@ -393,8 +393,9 @@ def test_speedups_scale_only_the_listed_runs_trainings(tmp_path):
 
 
 def test_speedups_skip_the_jobs_trained_at_or_after_their_measurement(tmp_path):
-    """A factor (now / then, "now" measured at commit M) scales the jobs trained before M only: jobs recorded at M or
-    at a descendant of it are already today's (a scratch git repository: A <- M <- B)."""
+    """A factor (now / then, "now" measured at commit M, "then" at the run's ``against``) scales the jobs trained
+    before M only: jobs recorded at M or at a descendant of it are already today's, and jobs recorded after the
+    commit the factor was measured against are left as recorded too (a scratch git repository: A <- M <- B)."""
     import subprocess
 
     repo = tmp_path / "repo"
@@ -428,6 +429,14 @@ def test_speedups_skip_the_jobs_trained_at_or_after_their_measurement(tmp_path):
     assert schedule.speedups_measured_at(doc) == m[:7]
     doc.write_text(json.dumps({"factors": {"nerf": 0.5}}))
     assert schedule.speedups_measured_at(doc) is None
+    # a factor measured against A scales the jobs trained at A or before it only: train:y (at M) and train:z (at B)
+    # were retrained after A; an unknown commit counts as older
+    assert schedule.jobs_past_their_factor(ledger, {"nerf": a[:7]}, repo=repo) == {"train:y:nerf", "train:z:nerf"}
+    assert schedule.jobs_past_their_factor(ledger, {"nerf": b}, repo=repo) == set()
+    assert schedule.jobs_past_their_factor(ledger, {"eigs": a}, repo=repo) == set()  # another run's factor
+    doc.write_text(json.dumps({"factors": {"nerf": 0.5}, "measured_at": b, "against": {"nerf": a}}))
+    assert schedule.speedups_against(doc) == {"nerf": a}
+    assert schedule.unscaled_jobs(ledger, doc, repo=repo) == ({"train:y:nerf", "train:z:nerf"}, b)
 
 
 def test_suite_report_adds_the_schedule_with_the_speedups(workflow, tmp_path, capsys, monkeypatch):
