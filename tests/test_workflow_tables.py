@@ -62,9 +62,10 @@ def test_default_config_schedules_every_table_variant():
     proc = snakemake("all", "-n", "--forceall", "--cores", "2", "--configfile=config/config.yaml")
     assert proc.returncode == 0, proc.stdout + proc.stderr
     counts = job_counts(proc.stdout)
-    # 26 runs on 6 scenes (22 Gaussian, 4 radiance-field), each evaluated; EDI/SfM/init at B = 4, 6, 8
+    # 26 runs on 6 scenes (22 Gaussian, 4 radiance-field), each evaluated; EDI/SfM/init at B = 4, 6, 8; COLMAP at
+    # B = 4 only, B = 6 and 8 resampled from it (docs/sfm.md "One SfM per scene")
     assert counts["train"] == 132 and counts["train_field"] == 24 and counts["evaluate"] == 156
-    assert counts["edi"] == counts["sfm"] == counts["init"] == 18
+    assert counts["edi"] == counts["init"] == 18 and counts["sfm"] == 6 and counts["sfm_resample"] == 12
     assert counts["tables"] == counts["figures"] == 1
     # shared runs are trained once: eigs+ feeds Tables I-V from one folder per scene
     assert proc.stdout.count("output: results/chair/b4/eigs+/model.ply") == 1
