@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import functools
 import heapq
 import io
 import json
@@ -197,25 +198,31 @@ def speedups_measured_at(path: Path) -> str | None:
     return str(commit) if commit else None
 
 
+@functools.cache
+def _ancestry(repo: Path, older: str, newer: str) -> int:
+    """``git merge-base --is-ancestor older newer`` in ``repo``: 0 when ``older`` is ``newer`` (either a prefix of the
+    other) or an ancestor of it, 1 when not, another code when git does not know one of them."""
+    if older.startswith(newer) or newer.startswith(older):
+        return 0
+    return subprocess.run(["git", "-C", str(repo), "merge-base", "--is-ancestor", older, newer],
+                          capture_output=True).returncode  # fmt: skip
+
+
+def _training_rows(directory: Path) -> list[tuple[str, str]]:
+    """(job, commit) of the training jobs of a ledger's ``jobs.csv`` that record a commit; empty without the file."""
+    path = Path(directory) / "jobs.csv"
+    if not path.exists():
+        return []
+    with path.open(newline="") as f:
+        return [(r["job"], r["commit"]) for r in csv.DictReader(f)
+                if r.get("job", "").startswith("train:") and r.get("commit")]  # fmt: skip
+
+
 def jobs_trained_since(directory: Path, commit: str, repo: Path = REPO) -> set[str]:
     """Training jobs of a ledger's ``jobs.csv`` recorded at ``commit`` or at a commit after it (``git merge-base
     --is-ancestor`` in ``repo``): their times are already today's, and a speed-up factor measured at ``commit`` does
     not apply to them. Empty without a jobs.csv; a commit git does not know counts as older."""
-    path = Path(directory) / "jobs.csv"
-    if not path.exists():
-        return set()
-    known: dict[str, bool] = {}
-
-    def since(c: str) -> bool:
-        if c not in known:
-            same = c.startswith(commit) or commit.startswith(c)
-            known[c] = same or subprocess.run(["git", "-C", str(repo), "merge-base", "--is-ancestor", commit, c],
-                                              capture_output=True).returncode == 0  # fmt: skip
-        return known[c]
-
-    with path.open(newline="") as f:
-        return {r["job"] for r in csv.DictReader(f) if r.get("job", "").startswith("train:") and r.get("commit")
-                and since(r["commit"])}  # fmt: skip
+    return {job for job, c in _training_rows(directory) if _ancestry(repo, commit, c) == 0}
 
 
 def speedups_against(path: Path) -> dict[str, str]:
@@ -232,29 +239,26 @@ def jobs_past_their_factor(directory: Path, against: dict[str, str], repo: Path 
     (their commit not ``against[run]`` or an ancestor of it): retrained since, they already carry part of the gain
     the factor measures, and are left as recorded (a conservative estimate). A commit git does not know counts as
     older, as in :func:`jobs_trained_since`."""
-    path = Path(directory) / "jobs.csv"
-    if not path.exists() or not against:
-        return set()
-    known: dict[tuple[str, str], bool] = {}
 
     def after(c: str, base: str) -> bool:
-        if (c, base) not in known:
-            same = c.startswith(base) or base.startswith(c)
-            older = same or subprocess.run(["git", "-C", str(repo), "merge-base", "--is-ancestor", c, base],
-                                           capture_output=True).returncode == 0  # fmt: skip
-            exists = subprocess.run(["git", "-C", str(repo), "cat-file", "-e", f"{c}^{{commit}}"],
-                                    capture_output=True).returncode == 0  # fmt: skip
-            known[(c, base)] = exists and not older
-        return known[(c, base)]
+        code = _ancestry(repo, c, base)
+        if code in (0, 1):
+            return code == 1
+        return _known(repo, c)  # git knows c but not ``base``: c counts as after it
 
     out = set()
-    with path.open(newline="") as f:
-        for r in csv.DictReader(f):
-            job = r.get("job", "")
-            run = job.split(":", 2)[-1]
-            if job.startswith("train:") and run in against and r.get("commit") and after(r["commit"], against[run]):
-                out.add(job)
+    for job, c in _training_rows(directory):
+        run = job.split(":", 2)[-1]
+        if run in against and after(c, against[run]):
+            out.add(job)
     return out
+
+
+@functools.cache
+def _known(repo: Path, commit: str) -> bool:
+    """Whether git in ``repo`` knows ``commit``."""
+    return subprocess.run(["git", "-C", str(repo), "cat-file", "-e", f"{commit}^{{commit}}"],
+                          capture_output=True).returncode == 0  # fmt: skip
 
 
 def unscaled_jobs(directory: Path | None, speedups: Path, repo: Path = REPO) -> tuple[set[str], str | None]:
@@ -269,7 +273,7 @@ def unscaled_jobs(directory: Path | None, speedups: Path, repo: Path = REPO) -> 
 
 def sped_up(times: dict[str, float], factors: dict[str, float], current: set[str] | None = None) -> dict[str, float]:
     """``times`` with every training job of a run in ``factors`` scaled by its factor (keys ``train:SCENE:RUN``),
-    except the jobs in ``current`` (trained with code as new as the factors' "now": :func:`jobs_trained_since`)."""
+    except the jobs in ``current`` (those the factors do not apply to: :func:`unscaled_jobs`)."""
     out = dict(times)
     for j, t in times.items():
         rule, _, rest = j.partition(":")
